@@ -1,0 +1,28 @@
+"""The background-grid bases: one registry line each.
+
+To add a basis, write a builder with ``name``, ``degree``,
+``cells_per_element`` and ``build(lower, n_elements, spacing) ->
+Discretization`` (see ``finite_element.py`` for scikit-fem elements and
+``bspline3.py`` for a basis of the library's own), and add it to ``BASES``.
+The property tests in ``tests/test_bases.py`` loop over this registry.
+"""
+
+from .bspline3 import BSPLINE3, ElementBSpline3, cubic_spline
+from .finite_element import Q1, Q2, SERENDIPITY, FiniteElementBasis
+from .lattice import Discretization
+from .polynomial import LocalPolynomials
+
+BASES = {builder.name: builder for builder in (Q1, Q2, SERENDIPITY, BSPLINE3)}
+
+__all__ = [
+    "BASES",
+    "BSPLINE3",
+    "Discretization",
+    "ElementBSpline3",
+    "FiniteElementBasis",
+    "LocalPolynomials",
+    "Q1",
+    "Q2",
+    "SERENDIPITY",
+    "cubic_spline",
+]

@@ -1,0 +1,51 @@
+"""What every basis hands to the grid: nodes, connectivity and local polynomials."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .polynomial import LocalPolynomials
+
+
+@dataclass(frozen=True)
+class Discretization:
+    """A basis laid on a rectangular lattice of elements.
+
+    Attributes
+    ----------
+    basis : str
+        Registry name of the basis.
+    spacing : float
+        Distance between neighbouring nodes (m).
+    element_width : float
+        Width of one element (m): ``spacing`` for q1 and bspline3,
+        ``2 * spacing`` for q2 and serendipity.
+    lower : ndarray, shape (2,)
+        Lower-left corner of the element lattice (m).
+    n_elements : (int, int)
+        Elements along x and y.
+    nodes : ndarray, shape (n_nodes, 2)
+        Node coordinates (m), exactly ``lower + i * spacing``.
+    connectivity : ndarray, shape (n_elements_x * n_elements_y, n_local), int32
+        Node indices of the local functions of element ``ix * n_elements_y + iy``.
+    polynomials : LocalPolynomials
+        Local functions in cell coordinates (xi along x, eta along y).
+    mesh : skfem.MeshQuad
+        The elements as a scikit-fem mesh (for plotting and output).
+    element : object
+        The element that defines the local functions.
+    """
+
+    basis: str
+    spacing: float
+    element_width: float
+    lower: np.ndarray
+    n_elements: tuple[int, int]
+    nodes: np.ndarray
+    connectivity: np.ndarray
+    polynomials: LocalPolynomials
+    mesh: Any
+    element: Any

@@ -1,0 +1,217 @@
+"""Property tests looped over every basis in the registry.
+
+Tolerances: 1e-12 for identities that hold exactly in exact arithmetic (the
+shape functions are evaluated from exact monomial coefficients, so only
+rounding of O(10) operations enters); 1e-6 relative for central finite
+differences with step 1e-6 of a cell (truncation error ~ step^2 * f''').
+"""
+
+import numpy as np
+import pytest
+import skfem
+
+from femgrid_mpm import Grid
+from femgrid_mpm.bases import BASES, cubic_spline
+
+BASIS_NAMES = list(BASES)
+LOWER, UPPER, SPACING = (-1.0, 0.5), (3.0, 2.5), 0.25
+
+
+def make_grid(basis):
+    return Grid(basis, lower=LOWER, upper=UPPER, spacing=SPACING)
+
+
+def random_points(n=500, seed=0):
+    rng = np.random.default_rng(seed)
+    return np.asarray(LOWER) + rng.random((n, 2)) * (np.asarray(UPPER) - np.asarray(LOWER))
+
+
+def lattice_points():
+    """Points exactly on cell edges and corners, domain boundary included."""
+    x = LOWER[0] + SPACING * np.arange(int(round((UPPER[0] - LOWER[0]) / SPACING)) + 1)
+    y = LOWER[1] + SPACING * np.arange(int(round((UPPER[1] - LOWER[1]) / SPACING)) + 1)
+    corners = np.column_stack([a.ravel() for a in np.meshgrid(x, y)])
+    rng = np.random.default_rng(1)
+    on_vertical = np.column_stack([rng.choice(x, 50), rng.uniform(LOWER[1], UPPER[1], 50)])
+    on_horizontal = np.column_stack([rng.uniform(LOWER[0], UPPER[0], 50), rng.choice(y, 50)])
+    return np.vstack([corners, on_vertical, on_horizontal])
+
+
+POINT_SETS = {"random": random_points(), "edges and corners": lattice_points()}
+
+
+@pytest.mark.parametrize("points_kind", list(POINT_SETS))
+@pytest.mark.parametrize("basis", BASIS_NAMES)
+def test_partition_of_unity(basis, points_kind):
+    N, dNdx, dNdy = make_grid(basis).shape_functions(POINT_SETS[points_kind])
+    np.testing.assert_allclose(N.sum(axis=1), 1.0, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(dNdx.sum(axis=1), 0.0, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(dNdy.sum(axis=1), 0.0, rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("points_kind", list(POINT_SETS))
+@pytest.mark.parametrize("basis", BASIS_NAMES)
+def test_linear_completeness(basis, points_kind):
+    grid = make_grid(basis)
+    points = POINT_SETS[points_kind]
+    N, dNdx, dNdy = grid.shape_functions(points)
+    np.testing.assert_allclose(N @ grid.nodes, points, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(dNdx @ grid.nodes[:, 0], 1.0, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(dNdy @ grid.nodes[:, 0], 0.0, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(dNdx @ grid.nodes[:, 1], 0.0, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(dNdy @ grid.nodes[:, 1], 1.0, rtol=0, atol=1e-10)
+
+
+QUADRATICS = {
+    "x^2": lambda x, y: x**2,
+    "xy": lambda x, y: x * y,
+    "y^2": lambda x, y: y**2,
+    "x^2 y^2": lambda x, y: x**2 * y**2,
+}
+REPRODUCED = {"q2": ["x^2", "xy", "y^2", "x^2 y^2"], "serendipity": ["x^2", "xy", "y^2"]}
+
+
+@pytest.mark.parametrize(
+    "basis,monomial", [(b, m) for b, ms in REPRODUCED.items() for m in ms]
+)
+def test_quadratic_completeness(basis, monomial):
+    grid = make_grid(basis)
+    points = np.vstack(list(POINT_SETS.values()))
+    f = QUADRATICS[monomial]
+    N, _, _ = grid.shape_functions(points)
+    np.testing.assert_allclose(N @ f(*grid.nodes.T), f(*points.T), rtol=0, atol=1e-12)
+
+
+def test_serendipity_does_not_reproduce_x2y2():
+    """The check above could fail: serendipity lacks the x^2 y^2 term."""
+    grid = make_grid("serendipity")
+    points = random_points(50)
+    N, _, _ = grid.shape_functions(points)
+    f = QUADRATICS["x^2 y^2"]
+    assert np.max(np.abs(N @ f(*grid.nodes.T) - f(*points.T))) > 1e-4
+
+
+def test_bspline3_quadratic_offset():
+    """Cubic B-splines on nodes reproduce x^2 + h^2/3 (Schoenberg), an exact identity."""
+    grid = make_grid("bspline3")
+    points = np.vstack(list(POINT_SETS.values()))
+    N, _, _ = grid.shape_functions(points)
+    np.testing.assert_allclose(N @ grid.nodes[:, 0] ** 2, points[:, 0] ** 2 + SPACING**2 / 3, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("basis", BASIS_NAMES)
+def test_gradients_by_finite_differences(basis):
+    grid = make_grid(basis)
+    width = grid.discretization.element_width
+    rng = np.random.default_rng(2)
+    # keep points inside one element so the functions are smooth across the stencil
+    element_corner = grid.lower + width * rng.integers(0, grid.discretization.n_elements, size=(200, 2))
+    points = element_corner + width * rng.uniform(0.05, 0.95, size=(200, 2))
+    step = 1e-6 * width
+    N, dNdx, dNdy = grid.shape_functions(points)
+    for derivative, shift in ((dNdx, [step, 0.0]), (dNdy, [0.0, step])):
+        plus, _, _ = grid.shape_functions(points + shift)
+        minus, _, _ = grid.shape_functions(points - shift)
+        difference = ((plus - minus) / (2 * step)).toarray()
+        scale = np.max(np.abs(derivative.toarray()))
+        np.testing.assert_allclose(derivative.toarray(), difference, rtol=0, atol=1e-6 * scale)
+
+
+SKFEM_ELEMENTS = {"q1": skfem.ElementQuad1, "q2": skfem.ElementQuad2, "serendipity": skfem.ElementQuadS2}
+
+
+@pytest.mark.parametrize("basis", list(SKFEM_ELEMENTS))
+def test_values_agree_with_scikit_fem_probes(basis):
+    grid = make_grid(basis)
+    points = np.vstack([random_points(20, seed=3), [[0.1, 0.6], [2.9, 2.4], [1.0, 1.5]]])
+    reference = skfem.Basis(grid.mesh, SKFEM_ELEMENTS[basis]()).probes(points.T).toarray()
+    N, _, _ = grid.shape_functions(points)
+    np.testing.assert_allclose(N.toarray(), reference, rtol=0, atol=1e-12)
+
+
+def test_bspline3_matches_paper_formulas():
+    """The 16 functions of the paper's section 3.4, typed out independently."""
+    grid = make_grid("bspline3")
+    rng = np.random.default_rng(4)
+    cell = np.array([5, 3])
+    local = rng.random((30, 2))
+    points = grid.lower + (cell + local) * SPACING
+    xi, eta = local.T
+    one_d = [
+        lambda s: (1 - s) ** 3 / 6,
+        lambda s: 2 / 3 - s**2 + s**3 / 2,
+        lambda s: 1 / 6 + s / 2 + s**2 / 2 - s**3 / 2,
+        lambda s: s**3 / 6,
+    ]
+    N, _, _ = grid.shape_functions(points)
+    N = N.toarray()
+    for a in range(4):
+        for b in range(4):
+            node = np.flatnonzero(
+                np.all(np.isclose(grid.nodes, grid.lower + (cell + [a - 1, b - 1]) * SPACING), axis=1)
+            )
+            np.testing.assert_allclose(N[:, node[0]], one_d[a](xi) * one_d[b](eta), rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize("basis", BASIS_NAMES)
+def test_sign_of_shape_functions(basis):
+    N, _, _ = make_grid(basis).shape_functions(np.vstack(list(POINT_SETS.values())))
+    if basis in ("q2", "serendipity"):
+        assert N.data.min() < -0.1  # both take clearly negative values inside elements
+    else:
+        assert N.data.min() >= -1e-15  # never negative beyond rounding
+
+
+def test_cubic_spline_kernel():
+    """Eq. 23 values at a few distances, and continuity of the slope at |r| = 1."""
+    value, slope = cubic_spline(np.array([0.0, 0.5, 1.0, 1.5, 2.0, 2.5]))
+    np.testing.assert_allclose(value, [2 / 3, 2 / 3 - 0.25 + 0.0625, 1 / 6, 1 / 48, 0, 0], atol=1e-15)
+    left, right = cubic_spline(np.array([1 - 1e-12, 1 + 1e-12]))[1]
+    assert abs(left - right) < 1e-9
+
+
+@pytest.mark.parametrize(
+    "basis,expected", [("q1", 45), ("q2", 45), ("serendipity", 38), ("bspline3", 85)]
+)
+def test_paper_bar_grid_node_counts(basis, expected):
+    """7 x 1 domain, spacing 0.5: 15 x 3 lattice nodes (paper: 45)."""
+    assert Grid(basis, (0, 0), (7, 1), 0.5).n_nodes == expected
+
+
+def test_extent_rounded_up_to_whole_elements():
+    grid = Grid("q2", (0, 0), (1.5, 1.0), 0.5)  # 3 spacings: not a whole q2 element
+    np.testing.assert_allclose(grid.upper, [2.0, 1.0])
+    assert Grid("q1", (0, 0), (1.5, 1.0), 0.5).upper.tolist() == [1.5, 1.0]
+
+
+@pytest.mark.parametrize("basis", BASIS_NAMES)
+def test_points_outside_are_named(basis):
+    grid = make_grid(basis)
+    points = np.array([[0.0, 1.0], [3.5, 1.0], [0.0, 3.0], [np.nan, 1.0]])
+    with pytest.raises(ValueError, match=r"3 of 4 points lie outside the grid .* the first is point 1 at \(3.5, 1\)"):
+        grid.shape_functions(points)
+
+
+def test_nodes_where():
+    grid = Grid("bspline3", (0, 0), (2, 1), 0.5)
+    left = grid.nodes_where("x <= 0")
+    assert set(grid.nodes[left, 0]) == {-0.5, 0.0}  # boundary column and the extra one beyond
+    assert len(left) == 2 * 5
+    np.testing.assert_array_equal(grid.nodes_where(lambda x, y: x <= 0), left)
+    both = grid.nodes_where("(x <= 0) or (x >= 2)")
+    assert len(both) == 4 * 5
+    with pytest.raises(ValueError, match="not allowed"):
+        grid.nodes_where("x.__class__")
+
+
+@pytest.mark.parametrize("kwargs,message", [
+    (dict(basis="q3"), "unknown basis 'q3'"),
+    (dict(spacing=0.0), "spacing must be a positive"),
+    (dict(spacing=float("nan")), "spacing must be a positive"),
+    (dict(upper=(0.0, 1.0)), "must exceed lower"),
+    (dict(spacing=1e-5), "more than the limit"),
+])
+def test_bad_grid_arguments(kwargs, message):
+    arguments = dict(basis="q1", lower=(0.0, 0.0), upper=(1.0, 1.0), spacing=0.5) | kwargs
+    with pytest.raises(ValueError, match=message):
+        Grid(**arguments)
