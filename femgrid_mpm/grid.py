@@ -17,6 +17,7 @@ array([[0.3, 0.2],
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Callable, Union
 
@@ -115,6 +116,31 @@ class Grid:
     def mesh(self):
         """The elements as a scikit-fem ``MeshQuad``."""
         return self.discretization.mesh
+
+    @property
+    def nonnegative(self) -> bool:
+        """Whether every shape function is >= 0 (q1, bspline3)."""
+        return self.discretization.nonnegative
+
+    @functools.cached_property
+    def node_integrals(self) -> np.ndarray:
+        """``integral(phi_i)`` over the grid's domain (m^2), shape (n_nodes,).
+
+        The share of the domain's area each node carries, exact (3 x 3 Gauss
+        points per element integrate the cubic pieces exactly).  A node of a
+        body filling its whole support has lumped volume equal to this.
+        """
+        d = self.discretization
+        gauss, weights = np.polynomial.legendre.leggauss(3)
+        gauss, weights = (gauss + 1) / 2, weights / 2
+        ix, iy = np.meshgrid(np.arange(d.n_elements[0]), np.arange(d.n_elements[1]), indexing="ij")
+        corners = self.lower + d.element_width * np.column_stack([ix.ravel(), iy.ravel()])
+        gx, gy = np.meshgrid(gauss, gauss, indexing="ij")
+        offsets = d.element_width * np.column_stack([gx.ravel(), gy.ravel()])
+        points = (corners[:, None, :] + offsets[None, :, :]).reshape(-1, 2)
+        area = np.tile(np.outer(weights, weights).ravel(), len(corners)) * d.element_width**2
+        N, _, _ = self.shape_functions(points)
+        return N.T @ area
 
     def __repr__(self) -> str:
         return (

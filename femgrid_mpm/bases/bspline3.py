@@ -85,6 +85,7 @@ class BSpline3Basis:
             polynomials=polynomials,
             mesh=skfem.MeshQuad.init_tensor(x, y),
             element=element,
+            nonnegative=True,
         )
 
 

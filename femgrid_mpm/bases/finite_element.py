@@ -42,6 +42,7 @@ class FiniteElementBasis:
     element: type
     degree: int
     cells_per_element: int
+    nonnegative: bool
 
     def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float) -> Discretization:
         width = spacing * self.cells_per_element
@@ -69,6 +70,7 @@ class FiniteElementBasis:
             polynomials=polynomials,
             mesh=mesh,
             element=element,
+            nonnegative=self.nonnegative,
         )
 
 
@@ -121,6 +123,8 @@ def _snap_to_lattice(points: np.ndarray, lower: np.ndarray, spacing: float) -> n
     return np.ascontiguousarray(lower + index * spacing)
 
 
-Q1 = FiniteElementBasis("q1", skfem.ElementQuad1, degree=1, cells_per_element=1)
-Q2 = FiniteElementBasis("q2", skfem.ElementQuad2, degree=2, cells_per_element=2)
-SERENDIPITY = FiniteElementBasis("serendipity", skfem.ElementQuadS2, degree=2, cells_per_element=2)
+Q1 = FiniteElementBasis("q1", skfem.ElementQuad1, degree=1, cells_per_element=1, nonnegative=True)
+Q2 = FiniteElementBasis("q2", skfem.ElementQuad2, degree=2, cells_per_element=2, nonnegative=False)
+SERENDIPITY = FiniteElementBasis(
+    "serendipity", skfem.ElementQuadS2, degree=2, cells_per_element=2, nonnegative=False
+)

@@ -37,6 +37,9 @@ class Discretization:
         The elements as a scikit-fem mesh (for plotting and output).
     element : object
         The element that defines the local functions.
+    nonnegative : bool
+        Whether every shape function is >= 0 (q1, bspline3), so that grid
+        masses can never be negative.
     """
 
     basis: str
@@ -49,3 +52,4 @@ class Discretization:
     polynomials: LocalPolynomials
     mesh: Any
     element: Any
+    nonnegative: bool

@@ -1,0 +1,16 @@
+"""Effects a scene can declare; the step runs only the ones it declares.
+
+Registry: scene ``kind`` -> class.  See :mod:`femgrid_mpm.effects.base` for
+the protocol and the stages.
+"""
+
+from .base import Stage, StepContext
+from .damping import MassDamping
+from .gravity import Gravity
+from .point_load import PointLoad
+from .supports import Support
+
+LOADS = {"point": PointLoad, "gravity": Gravity}
+DAMPING = {"mass": MassDamping}
+
+__all__ = ["DAMPING", "LOADS", "Gravity", "MassDamping", "PointLoad", "Stage", "StepContext", "Support"]

@@ -1,0 +1,92 @@
+"""The effect protocol: what a scene may add to the step, and where.
+
+An effect is a frozen (pydantic) dataclass whose fields are its scene keys:
+unknown keys are errors and values are validated on construction.  It names
+the one :class:`Stage` it acts at, and ``bind(simulation)`` returns the
+action the step calls there with the :class:`StepContext`, after any
+set-up (selecting nodes, finding a point) is done once.
+
+Stages, in step order (see :meth:`femgrid_mpm.solver.Simulation.advance`):
+
+``observe``
+    Read-only, at record steps, once the grid velocities of time ``t`` are
+    known: energies, particle output.
+``external_force``
+    Add forces with ``ctx.add_force(name, f)``; these are order-free sums,
+    and the step books each one's work.
+``adjust_force``
+    Forces that depend on the state or on the total (damping).
+``constrain``
+    Change a grid field in place: ``ctx.target`` is the grid velocity, then
+    the grid acceleration.  Contact comes first, supports last.
+
+Adding an effect: one class here in ``effects/``, one line in
+``effects/__init__.py``'s registry, one test that runs it alone.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Callable
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..solver import Simulation
+
+
+class Stage(str, enum.Enum):
+    OBSERVE = "observe"
+    EXTERNAL_FORCE = "external_force"
+    ADJUST_FORCE = "adjust_force"
+    CONSTRAIN = "constrain"
+
+
+@dataclass
+class StepContext:
+    """Everything an effect may read or change during one step.
+
+    Grid fields have shape (n_nodes, 2); particle data lives in
+    ``simulation.particles`` (shape (n, ...)).
+    """
+
+    simulation: "Simulation"
+    step: int = 0
+    time: float = 0.0
+    dt: float = 0.0
+    N: Any = None
+    dNdx: Any = None
+    dNdy: Any = None
+    momentum: np.ndarray | None = None
+    velocity: np.ndarray | None = None
+    force: np.ndarray | None = None
+    acceleration: np.ndarray | None = None
+    target: np.ndarray | None = None
+    #: forces added this step by each effect, for the work ledger
+    external: dict[str, np.ndarray] = field(default_factory=dict)
+    #: cumulative work done by each force effect (J per unit thickness)
+    work: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def particles(self):
+        return self.simulation.particles
+
+    @property
+    def grid(self):
+        return self.simulation.grid
+
+    @property
+    def mass(self):
+        return self.simulation.mass
+
+    def add_force(self, name: str, grid_force: np.ndarray) -> None:
+        """Add a nodal force (N per unit thickness), shape (n_nodes, 2)."""
+        self.force += grid_force
+        if name in self.external:
+            self.external[name] = self.external[name] + grid_force
+        else:
+            self.external[name] = grid_force
+
+
+Action = Callable[[StepContext], None]

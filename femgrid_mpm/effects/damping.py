@@ -1,0 +1,35 @@
+"""Mass-proportional damping, ``f_i = -c (M v)_i``: dynamic relaxation."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import NonNegativeFloat
+from pydantic.dataclasses import dataclass
+
+from .base import Stage, StepContext
+from .config import EFFECT_CONFIG
+
+
+@dataclass(frozen=True, config=EFFECT_CONFIG)
+class MassDamping:
+    """``[damping] kind = "mass"``, ``coefficient = c`` (1/s).
+
+    Acts on the grid velocity with the step's own mass (lumped or
+    consistent), so a rigid motion decays as ``exp(-c t)``.  Its (negative)
+    work is booked like any other force's.
+    """
+
+    kind: Literal["mass"]
+    coefficient: NonNegativeFloat
+
+    name = "damping"
+    stage = Stage.ADJUST_FORCE
+
+    def bind(self, simulation):
+        c = float(self.coefficient)
+
+        def damp(ctx: StepContext) -> None:
+            ctx.add_force(self.name, -c * ctx.mass.apply(ctx.velocity))
+
+        return damp

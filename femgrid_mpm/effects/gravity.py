@@ -1,0 +1,31 @@
+"""Gravity: a uniform body acceleration, ``f_i = sum_p m_p N_ip g`` (paper Eq. 13)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic.dataclasses import dataclass
+
+from .base import Stage, StepContext
+from .config import EFFECT_CONFIG
+
+
+@dataclass(frozen=True, config=EFFECT_CONFIG)
+class Gravity:
+    """``[[loads]] kind = "gravity"``: ``acceleration = [gx, gy]`` (m/s^2)."""
+
+    kind: Literal["gravity"]
+    acceleration: tuple[float, float]
+
+    name = "gravity"
+    stage = Stage.EXTERNAL_FORCE
+
+    def bind(self, simulation):
+        g = np.asarray(self.acceleration, dtype=float)
+        weight = simulation.particles.mass[:, None] * g  # constant: computed once
+
+        def add_gravity(ctx: StepContext) -> None:
+            ctx.add_force(self.name, ctx.N.T @ weight)
+
+        return add_gravity

@@ -1,0 +1,68 @@
+"""A force on one material point, ramped in time."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import NonNegativeFloat
+from pydantic.dataclasses import dataclass
+
+from .base import Stage, StepContext
+from .config import EFFECT_CONFIG
+
+
+@dataclass(frozen=True, config=EFFECT_CONFIG)
+class PointLoad:
+    """``[[loads]] kind = "point"``: a force on the point of ``body`` nearest ``at``.
+
+    Parameters
+    ----------
+    body : str
+        Name of the body.
+    at : (float, float)
+        Where (m); the point nearest to it at t = 0 carries the load for the
+        whole run.
+    force : (float, float)
+        Full force (N per unit thickness).
+    ramp : float
+        The force grows linearly from zero to full at this time (s), then is
+        held; 0 applies it at once.
+    model : {"force", "paper_eq35"}
+        ``"force"``: the point receives ``force``.  ``"paper_eq35"``: the
+        paper's Eq. 35, an acceleration ``b = force / m_p * m_p / m_tot`` of
+        the point, i.e. the point (and the body) receives only
+        ``force * m_p / m_tot``.
+    """
+
+    kind: Literal["point"]
+    body: str
+    at: tuple[float, float]
+    force: tuple[float, float]
+    ramp: NonNegativeFloat = 0.0
+    model: Literal["force", "paper_eq35"] = "force"
+
+    name = "point_load"
+    stage = Stage.EXTERNAL_FORCE
+
+    def bind(self, simulation):
+        particles = simulation.particles
+        members = np.flatnonzero(particles.body == simulation.body_index(self.body))
+        distance = np.linalg.norm(particles.x[members] - np.asarray(self.at), axis=1)
+        point = int(members[np.argmin(distance)])
+        force = np.asarray(self.force, dtype=float)
+        if self.model == "paper_eq35":
+            force = force * particles.mass[point] / particles.mass[members].sum()
+        self_name = f"{self.name}:{self.body}"
+        n_nodes = simulation.grid.n_nodes
+
+        def add_point_load(ctx: StepContext) -> None:
+            scale = 1.0 if self.ramp == 0 else min(1.0, ctx.time / self.ramp)
+            start, stop = ctx.N.indptr[point], ctx.N.indptr[point + 1]
+            grid_force = np.zeros((n_nodes, 2))
+            np.add.at(grid_force, ctx.N.indices[start:stop], np.outer(ctx.N.data[start:stop], scale * force))
+            ctx.add_force(self_name, grid_force)
+
+        add_point_load.point = point  # type: ignore[attr-defined]
+        add_point_load.applied_force = force  # type: ignore[attr-defined]
+        return add_point_load

@@ -1,0 +1,94 @@
+"""Material-point state (plain arrays) and seeding of rectangles."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Particles:
+    """The state carried by the material points, body after body.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n, 2)
+        Positions (m).
+    v : ndarray, shape (n, 2)
+        Velocities (m/s).
+    mass : ndarray, shape (n,)
+        Masses (kg per unit thickness); constant.
+    density : ndarray, shape (n,)
+        Current mass densities (kg/m^3); volume is ``mass / density``.
+    stress : ndarray, shape (n, 3)
+        Cauchy stress xx, yy, xy (Pa).
+    strain : ndarray, shape (n, 3)
+        Small strain xx, yy, xy (tensor shear, half the engineering shear).
+    body : ndarray of int32, shape (n,)
+        Index of the body in scene order.
+    x0 : ndarray, shape (n, 2)
+        Initial positions (m).
+    """
+
+    x: np.ndarray
+    v: np.ndarray
+    mass: np.ndarray
+    density: np.ndarray
+    stress: np.ndarray
+    strain: np.ndarray
+    body: np.ndarray
+    x0: np.ndarray = field(repr=False)
+
+    @property
+    def n(self) -> int:
+        return len(self.mass)
+
+    @property
+    def volume(self) -> np.ndarray:
+        """Current volumes (m^2 per unit thickness), shape (n,)."""
+        return self.mass / self.density
+
+    def body_slices(self) -> list[slice]:
+        """Contiguous index range of each body (particles are stored body by body)."""
+        edges = np.flatnonzero(np.diff(self.body)) + 1
+        bounds = [0, *edges.tolist(), self.n]
+        return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
+
+    @classmethod
+    def concatenate(cls, parts: list["Particles"]) -> "Particles":
+        return cls(**{name: np.concatenate([getattr(p, name) for p in parts]) for name in cls.__dataclass_fields__})
+
+    def copy(self) -> "Particles":
+        return Particles(**{name: getattr(self, name).copy() for name in self.__dataclass_fields__})
+
+
+def seed_rectangle(lower, upper, spacing: float, points_per_cell: int) -> tuple[np.ndarray, np.ndarray]:
+    """Points at the centroids of a uniform subdivision of a rectangle.
+
+    The rectangle is cut into ``nx x ny`` equal sub-cells with
+    ``n = round(extent * points_per_cell / spacing)`` (at least 1) per
+    direction, so a rectangle aligned with the grid gets exactly
+    ``points_per_cell`` x ``points_per_cell`` points in every grid cell, and
+    any rectangle is filled exactly (equal volumes summing to its area).
+
+    Returns
+    -------
+    points : ndarray, shape (nx * ny, 2)
+    volume : float
+        Volume (area) of each point (m^2).
+    """
+    lower = np.asarray(lower, dtype=float)
+    upper = np.asarray(upper, dtype=float)
+    extent = upper - lower
+    counts = np.maximum(1, np.rint(extent * points_per_cell / spacing)).astype(int)
+    pitch = extent / counts
+    axes = [lower[k] + pitch[k] * (np.arange(counts[k]) + 0.5) for k in range(2)]
+    gx, gy = np.meshgrid(*axes, indexing="ij")
+    return np.column_stack([gx.ravel(), gy.ravel()]), float(pitch[0] * pitch[1])
+
+
+def count_rectangle(lower, upper, spacing: float, points_per_cell: int) -> int:
+    """Number of points :func:`seed_rectangle` makes, without making them."""
+    extent = np.asarray(upper, dtype=float) - np.asarray(lower, dtype=float)
+    return int(np.prod(np.maximum(1, np.rint(extent * points_per_cell / spacing))))

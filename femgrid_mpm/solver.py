@@ -1,0 +1,290 @@
+"""The explicit MPM step of the paper (section 3.2), composed from declared effects.
+
+Examples
+--------
+A block moving rigidly moves exactly:
+
+>>> from femgrid_mpm.scene import Scene
+>>> scene = Scene.model_validate({
+...     "grid": {"basis": "q1", "lower": [0, 0], "upper": [4, 2], "spacing": 0.5},
+...     "time": {"dt": 0.01, "end": 1.0},
+...     "bodies": [{"name": "block", "lower": [0.5, 0.5], "upper": [1.5, 1.5], "velocity": [1.0, 0.25],
+...                 "material": {"E": 1e4, "nu": 0.3, "density": 1e3}}]})
+>>> result = Simulation(scene).run()
+>>> bool(abs(result.particles.x - result.particles.x0 - [1.0, 0.25]).max() < 1e-12)
+True
+"""
+
+from __future__ import annotations
+
+import time as clock
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .diagnostics import NegativeMassMonitor, SimulationStopped
+from .effects.base import Stage, StepContext
+from .energy import EnergyBookkeeping
+from .expressions import compile_expression
+from .grid import Grid
+from .mass import ConsistentMass, LumpedMass, SingularMassError
+from .materials import LinearElastic
+from .particles import Particles, seed_rectangle
+from .scene import Scene
+from .stability import critical_time_step
+
+
+@dataclass
+class RunResult:
+    """What a run produced.
+
+    Attributes
+    ----------
+    status : {"completed", "stopped"}
+    message : str
+        Why the run ended.
+    energy : dict of ndarray or None
+        Columns of :data:`femgrid_mpm.energy.COLUMNS`, one entry per record.
+    particles : Particles
+        The final (or last good) state.
+    summary : dict
+        Title, basis, mass, steps, wall time, counts, negative-mass events.
+    """
+
+    status: str
+    message: str
+    energy: dict | None
+    particles: Particles
+    summary: dict = field(default_factory=dict)
+
+
+class Simulation:
+    """A scene, built: grid, particles, materials, mass model and bound effects.
+
+    Parameters
+    ----------
+    scene : Scene
+    observers : list, optional
+        Extra observing effects (objects with ``name``, ``stage`` and
+        ``bind``), e.g. writers of particle output.
+    """
+
+    def __init__(self, scene: Scene, observers: list | None = None):
+        self.scene = scene
+        spec = scene.grid
+        self.grid = Grid(spec.basis, spec.lower, spec.upper, spec.spacing)
+        self.materials = [LinearElastic(b.material.E, b.material.nu, b.material.density, b.material.plane) for b in scene.bodies]
+        self.particles = self._seed()
+        self.body_slices = self.particles.body_slices()
+        self.reference_mass = max(m.density for m in self.materials) * spec.spacing**2
+        self.mass = self._mass_model()
+        self.critical_dt = critical_time_step(
+            spec.basis, scene.solver.mass, self.grid.discretization.element_width, max(m.wave_speed for m in self.materials)
+        )
+        self.dt = self._time_step()
+        self.n_steps = int(np.ceil(scene.time.end / self.dt - 1e-9))
+        self.every = scene.output.every if scene.output else 0
+        self.negative_mass = NegativeMassMonitor(
+            self.reference_mass, scene.solver.negative_mass, applies=scene.solver.mass == "lumped"
+        )
+        self.energy = EnergyBookkeeping() if scene.output and scene.output.energy else None
+        declared = [*scene.loads, *([scene.damping] if scene.damping else []), *scene.supports]
+        declared += [self.energy] if self.energy else []
+        declared += observers or []
+        self.effects: dict[Stage, list[tuple[str, Callable]]] = {stage: [] for stage in Stage}
+        for effect in declared:
+            self.effects[effect.stage].append((effect.name, effect.bind(self)))
+        self.context = StepContext(self, dt=self.dt)
+        self.step_index = 0
+        self.time = 0.0
+        self.wall_time = 0.0
+
+    # -- set-up -----------------------------------------------------------------
+
+    def _seed(self) -> Particles:
+        parts = []
+        for index, (body, material) in enumerate(zip(self.scene.bodies, self.materials)):
+            x, volume = seed_rectangle(body.lower, body.upper, self.scene.grid.spacing, body.points_per_cell)
+            n = len(x)
+            v = np.zeros((n, 2))
+            for axis, component in enumerate(body.velocity):
+                if isinstance(component, str):
+                    v[:, axis] = compile_expression(component, ("x", "y"))(x=x[:, 0], y=x[:, 1])
+                else:
+                    v[:, axis] = component
+            parts.append(
+                Particles(
+                    x=x,
+                    v=v,
+                    mass=np.full(n, material.density * volume),
+                    density=np.full(n, material.density),
+                    stress=np.zeros((n, 3)),
+                    strain=np.zeros((n, 3)),
+                    body=np.full(n, index, dtype=np.int32),
+                    x0=x.copy(),
+                )
+            )
+        return Particles.concatenate(parts)
+
+    def _mass_model(self):
+        solver = self.scene.solver
+        if solver.mass == "lumped":
+            return LumpedMass(self.grid.n_nodes, self.reference_mass)
+        return ConsistentMass(
+            self.grid.n_nodes,
+            self.reference_mass,
+            node_integrals=self.grid.node_integrals,
+            nonnegative=self.grid.nonnegative,
+            weak_fraction=solver.weak_fraction,
+            tolerance=solver.cg_tolerance,
+            fallback=solver.consistent_fallback,
+            blend=solver.blend,
+        )
+
+    def _time_step(self) -> float:
+        time = self.scene.time
+        if time.dt != "auto":
+            return float(time.dt)
+        if not self.critical_dt > 0:
+            raise ValueError(
+                f"dt = 'auto' is impossible: {self.scene.grid.basis} with {self.scene.solver.mass} mass has no stable time step"
+            )
+        return time.safety * self.critical_dt
+
+    def body_index(self, name: str) -> int:
+        return [body.name for body in self.scene.bodies].index(name)
+
+    @property
+    def active_effects(self) -> list[str]:
+        """Names of the effects this scene runs, in stage order."""
+        return [name for stage in Stage for name, _ in self.effects[stage]]
+
+    # -- the step ------------------------------------------------------------------
+
+    def project(self) -> StepContext:
+        """Paper steps 1-3: shape functions at the points, grid mass, grid velocity (Eq. 17)."""
+        ctx, p = self.context, self.particles
+        ctx.step, ctx.time = self.step_index, self.time
+        try:
+            ctx.N, ctx.dNdx, ctx.dNdy = self.grid.shape_functions(p.x)
+        except ValueError as error:
+            raise self._stop(f"a particle left the grid: {error}", "particle_left_grid") from None
+        self.mass.assemble(ctx.N, p.mass, p.volume)
+        self.negative_mass.check(self.mass.lumped, ctx.step, ctx.time, self.grid.nodes)
+        ctx.momentum = ctx.N.T @ (p.mass[:, None] * p.v)
+        ctx.velocity = self._solve(ctx.momentum, "velocity")
+        self._constrain(ctx.velocity)
+        return ctx
+
+    def advance(self, record: bool = False) -> None:
+        """One time step, paper section 3.2 steps 1-11."""
+        ctx, p, dt = self.project(), self.particles, self.dt
+        if record:
+            self._run(Stage.OBSERVE)
+        # 4-6: strain increment from the grid velocity (Eq. 18), then stress (Eq. 6)
+        dv_dx = ctx.dNdx @ ctx.velocity  # (n, 2): d(vx)/dx, d(vy)/dx
+        dv_dy = ctx.dNdy @ ctx.velocity  # (n, 2): d(vx)/dy, d(vy)/dy
+        strain_increment = dt * np.column_stack([dv_dx[:, 0], dv_dy[:, 1], 0.5 * (dv_dy[:, 0] + dv_dx[:, 1])])
+        p.strain += strain_increment
+        for material, members in zip(self.materials, self.body_slices):
+            material.stress_increment(strain_increment[members], out=p.stress[members])
+        # 7: internal force (Eq. 11) with the volumes of time t, then declared forces
+        weighted_stress = p.volume[:, None] * p.stress
+        ctx.force = -(ctx.dNdx.T @ weighted_stress[:, [0, 2]] + ctx.dNdy.T @ weighted_stress[:, [2, 1]])
+        ctx.external = {}
+        self._run(Stage.EXTERNAL_FORCE)
+        self._run(Stage.ADJUST_FORCE)
+        ctx.acceleration = self._solve(ctx.force, "acceleration")
+        self._constrain(ctx.acceleration)
+        self._book_work(ctx)
+        # 8-10: velocity (Eq. 19) with the new forces, position (Eq. 20) with the
+        # grid velocity of time t, density (Eq. 21)
+        p.v += dt * (ctx.N @ ctx.acceleration)
+        p.x += dt * (ctx.N @ ctx.velocity)
+        p.density *= np.exp(-dt * (dv_dx[:, 0] + dv_dy[:, 1]))
+        # 11
+        self.step_index += 1
+        self.time = self.step_index * dt
+        if not np.isfinite(p.v.sum() + p.x.sum() + p.stress.sum()):
+            raise self._stop("the state is no longer finite (NaN or Inf)", "not_finite")
+
+    def _solve(self, rhs: np.ndarray, kind: str) -> np.ndarray:
+        try:
+            return self.mass.solve(rhs, kind)
+        except SingularMassError as error:
+            raise self._stop(str(error), "singular_mass") from None
+
+    def _constrain(self, field_: np.ndarray) -> None:
+        self.context.target = field_
+        self._run(Stage.CONSTRAIN)
+        self.context.target = None
+
+    def _run(self, stage: Stage) -> None:
+        for _, action in self.effects[stage]:
+            action(self.context)
+
+    def _book_work(self, ctx: StepContext) -> None:
+        """Work of each declared force over the step, at the mid-step grid velocity."""
+        if not ctx.external:
+            return
+        mid_velocity = ctx.velocity + 0.5 * self.dt * ctx.acceleration
+        for name, grid_force in ctx.external.items():
+            ctx.work[name] = ctx.work.get(name, 0.0) + self.dt * float(np.sum(grid_force * mid_velocity))
+
+    def _stop(self, message: str, reason: str) -> SimulationStopped:
+        return SimulationStopped(f"step {self.step_index} (t = {self.time:.6g} s): {message}", self.step_index, self.time, reason)
+
+    # -- running ---------------------------------------------------------------
+
+    def run(self, progress: Callable[[int, float], None] | None = None) -> RunResult:
+        """Step to the end time, recording every ``output.every`` steps.
+
+        Raises
+        ------
+        SimulationStopped
+            When a guard stops the run; its ``result`` holds the records and
+            the state up to that step.
+        """
+        start = clock.perf_counter()
+        try:
+            while self.step_index < self.n_steps:
+                self.advance(record=bool(self.every) and self.step_index % self.every == 0)
+                if progress is not None:
+                    progress(self.step_index, self.time)
+            if self.every:
+                self.project()
+                self._run(Stage.OBSERVE)
+        except SimulationStopped as stop:
+            self.wall_time += clock.perf_counter() - start
+            stop.result = self.result("stopped", str(stop))
+            raise
+        self.wall_time += clock.perf_counter() - start
+        return self.result("completed", f"reached t = {self.time:.6g} s")
+
+    def result(self, status: str, message: str) -> RunResult:
+        scene = self.scene
+        summary = {
+            "title": scene.title,
+            "basis": scene.grid.basis,
+            "mass": scene.solver.mass,
+            "status": status,
+            "reason": message,
+            "steps": self.step_index,
+            "time": self.time,
+            "dt": self.dt,
+            "critical_dt": self.critical_dt,
+            "wall_time": self.wall_time,
+            "points": self.particles.n,
+            "nodes": self.grid.n_nodes,
+            "effects": self.active_effects,
+            "negative_mass": self.negative_mass.summary(),
+        }
+        if isinstance(self.mass, ConsistentMass):
+            summary["consistent_mass"] = {
+                "cg_iterations": self.mass.iterations,
+                "weak_nodes_last_step": self.mass.weak_nodes,
+                "blended_steps": self.mass.blended_steps,
+            }
+        energy = self.energy.table() if self.energy else None
+        return RunResult(status, message, energy, self.particles, summary)
