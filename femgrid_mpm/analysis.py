@@ -83,7 +83,7 @@ def bar_axial_period_1d(length: float, E: float, nu: float, density: float, plan
     ``E' = E`` in plane stress and ``E / (1 - nu^2)`` in plane strain.
     """
     modulus = E if plane == "stress" else E / (1 - nu**2)
-    return 2 * length / np.sqrt(modulus / density)
+    return float(2 * length / np.sqrt(modulus / density))
 
 
 def bar_axial_period_2d(
