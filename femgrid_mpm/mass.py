@@ -24,11 +24,20 @@ in three layers:
    diagonals.  This keeps every row sum (so rigid motion and momentum stay
    exact) and only adds positive semi-definite terms, so it never makes the
    matrix less definite.
-3. What remains singular is *detected*: preconditioned CG then fails to
-   converge on the force system.  The ``fallback`` policy decides:
+3. What remains singular is *detected*: a SuperLU pivot falls below
+   ``1e-10`` of its own diagonal entry (the node's function is reproduced by
+   the others), or preconditioned CG fails to converge on the force system.  The ``fallback`` policy decides:
    ``"error"`` raises :class:`SingularMassError`; ``"blend"`` solves with
    ``(1 - blend) M + blend * diag(lumped)`` for that step, counts the event
-   and goes on.
+   and goes on (where row sums are not all positive, q2 and serendipity,
+   the HRZ diagonal, ``M_ii`` scaled to the total mass, replaces them).
+
+Linear solver: ``"direct"`` factors the matrix once per step with SuperLU
+(both solves of the step reuse the factors) and checks every solution's
+residual, because SuperLU returns garbage without warning on a singular
+matrix.  ``"cg"`` is Jacobi-preconditioned CG warm-started from the last
+two solutions.  ``"auto"`` takes direct up to 5000 active nodes, where it
+is much faster (the paper's problems), and CG above.
 """
 
 from __future__ import annotations
@@ -37,6 +46,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+#: largest number of active nodes for which "auto" factors the matrix
+DIRECT_LIMIT = 5000
 
 
 class SingularMassError(RuntimeError):
@@ -63,7 +76,7 @@ class LumpedMass:
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
         self.lumped = N.T @ m_p
-        self.active = np.abs(self.lumped) > 1e-12 * self.reference_mass
+        self.active = _active(N, m_p, self.lumped, self.reference_mass)
         self._inverse = np.divide(1.0, self.lumped, out=np.zeros(self.n_nodes), where=self.active)
 
     def solve(self, rhs: np.ndarray, kind: str = "velocity") -> np.ndarray:
@@ -77,7 +90,7 @@ class LumpedMass:
 
 @dataclass
 class ConsistentMass:
-    """Consistent mass ``N.T diag(m_p) N`` solved by Jacobi-preconditioned CG.
+    """Consistent mass ``N.T diag(m_p) N``, solved directly or by CG.
 
     Parameters
     ----------
@@ -92,6 +105,7 @@ class ConsistentMass:
         Volume fraction below which a node is weak.
     tolerance : float
         Relative residual at which CG stops.
+    linear_solver : {"auto", "direct", "cg"}
     fallback : {"error", "blend"}
         What to do when the matrix is found singular.
     blend : float
@@ -104,6 +118,7 @@ class ConsistentMass:
     nonnegative: bool = True
     weak_fraction: float = 0.01
     tolerance: float = 1e-10
+    linear_solver: str = "auto"
     fallback: str = "error"
     blend: float = 0.1
     kind = "consistent"
@@ -112,7 +127,7 @@ class ConsistentMass:
     blended_steps: int = 0
 
     def __post_init__(self):
-        self._previous: dict[str, np.ndarray] = {}
+        self._previous: dict[str, tuple] = {}
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
@@ -128,10 +143,14 @@ class ConsistentMass:
             if self.weak_nodes:
                 matrix = _lump_couplings(matrix, weak)
                 diagonal = matrix.diagonal()
-        # empty nodes: identity rows, so CG sees a definite block there
-        self.matrix = matrix + sp.diags((~self.active).astype(float))
+        # empty nodes: identity rows, so the solvers see a definite block there
+        self.matrix = (matrix + sp.diags((~self.active).astype(float))).tocsr()
         self._inverse_diagonal = 1.0 / np.where(self.active, diagonal, 1.0)
         self._blended = False
+        self._direct = self.linear_solver == "direct" or (
+            self.linear_solver == "auto" and np.count_nonzero(self.active) <= DIRECT_LIMIT
+        )
+        self._factors = _factor(self.matrix) if self._direct else None
 
     def apply(self, vector: np.ndarray) -> np.ndarray:
         """``M @ vector`` with the consistent matrix (empty rows zero)."""
@@ -140,57 +159,117 @@ class ConsistentMass:
     def solve(self, rhs: np.ndarray, kind: str = "velocity") -> np.ndarray:
         """Solve ``M x = rhs`` for the two columns of rhs (n_nodes, 2).
 
-        The initial guess is the previous step's solution of the same kind
-        (warm start) where a node was active then, and the lumped solution
-        elsewhere; for a rigid motion that guess is already exact.
+        ``kind`` ("velocity" or "acceleration") keys CG's warm start: the
+        last two solutions of the same kind are extrapolated.
         """
         rhs = np.where(self.active[:, None], rhs, 0.0)
-        guess = self._initial_guess(rhs, kind)
-        solution, converged, iterations = _preconditioned_cg(
-            self.matrix, rhs, guess, self._inverse_diagonal, self.tolerance, self.max_iterations
-        )
-        self.iterations += iterations
+        if not rhs.any():  # e.g. the relative momentum of a rigid motion
+            return np.zeros_like(rhs)
+        solution, converged = self._solve(rhs, kind)
         if not converged:
             if self.fallback != "blend":
+                how = "the direct solve left a large residual" if self._direct else "CG did not converge"
                 raise SingularMassError(
-                    f"the consistent mass matrix is singular or nearly so: CG did not converge in "
-                    f"{iterations} iterations on the {kind} system (too few points per cell for the basis, "
-                    f"or weakly supported nodes); use more points per cell, lumped mass, or "
-                    f"solver.consistent_fallback = 'blend'"
+                    f"the consistent mass matrix is singular or nearly so: {how} on the {kind} system "
+                    f"(too few points per cell for the basis, or weakly supported nodes); use more points "
+                    f"per cell, lumped mass, or solver.consistent_fallback = 'blend'"
                 )
-            solution = self._solve_blended(rhs, guess, kind)
-        self._previous[kind] = solution
+            self._blend_with_lumped()
+            solution, converged = self._solve(rhs, kind)
+            if not converged:
+                raise SingularMassError(f"the blended mass matrix could not be solved either ({kind} system)")
+        if not self._direct:
+            self._previous[kind] = (*self._previous.get(kind, ())[-1:], solution)
         return solution
 
-    def _initial_guess(self, rhs: np.ndarray, kind: str) -> np.ndarray:
-        scale = np.where(np.abs(self.lumped) > 1e-12 * self.reference_mass, self.lumped, 1.0 / self._inverse_diagonal)
-        guess = rhs / scale[:, None]
-        previous = self._previous.get(kind)
-        if previous is not None:
-            guess = np.where((previous != 0.0).any(axis=1)[:, None], previous, guess)
-        return guess * self.active[:, None]
-
-    def _solve_blended(self, rhs: np.ndarray, guess: np.ndarray, kind: str) -> np.ndarray:
-        if not self._blended:
-            if np.any(self.lumped[self.active] <= 0):
-                raise SingularMassError(
-                    "the consistent mass matrix is singular and cannot be blended with the lumped mass, "
-                    "which is not positive (negative shape functions); use more points per cell"
-                )
-            lumped = sp.diags(np.where(self.active, self.lumped, 0.0))
-            self.matrix = (1.0 - self.blend) * self.matrix + self.blend * lumped + sp.diags(
-                self.blend * (~self.active).astype(float)
-            )
-            self._inverse_diagonal = 1.0 / self.matrix.diagonal()
-            self._blended = True
-            self.blended_steps += 1
+    def _solve(self, rhs: np.ndarray, kind: str) -> tuple[np.ndarray, bool]:
+        if self._direct:
+            return _direct_solve(self._factors, self.matrix, rhs)
         solution, converged, iterations = _preconditioned_cg(
-            self.matrix, rhs, guess, self._inverse_diagonal, self.tolerance, self.max_iterations
+            self.matrix, rhs, self._initial_guess(rhs, kind), self._inverse_diagonal, self.tolerance, self.max_iterations
         )
         self.iterations += iterations
-        if not converged:
-            raise SingularMassError(f"CG did not converge on the blended mass matrix ({kind} system)")
-        return solution
+        return solution, converged
+
+    def _initial_guess(self, rhs: np.ndarray, kind: str) -> np.ndarray:
+        """Linear extrapolation of the last two solutions where they exist, the
+        lumped solution elsewhere (for a rigid motion that is already exact)."""
+        scale = np.where(np.abs(self.lumped) > 1e-12 * self.reference_mass, self.lumped, 1.0 / self._inverse_diagonal)
+        guess = rhs / scale[:, None]
+        history = self._previous.get(kind, ())
+        if len(history) == 2:
+            older, last = history
+            known = ((older != 0.0) & (last != 0.0)).any(axis=1)
+            guess = np.where(known[:, None], 2.0 * last - older, guess)
+        elif len(history) == 1:
+            guess = np.where((history[0] != 0.0).any(axis=1)[:, None], history[0], guess)
+        return guess * self.active[:, None]
+
+    def _blend_with_lumped(self) -> None:
+        """The fallback: ``(1 - blend) M + blend diag(lumped)`` for this step."""
+        if self._blended:
+            return
+        diagonal = self.matrix.diagonal()
+        if np.all(self.lumped[self.active] > 0):
+            target = np.where(self.active, self.lumped, 1.0)
+        else:
+            # negative row sums (q2, serendipity): HRZ lumping instead, the
+            # diagonal scaled to the total mass, positive by construction
+            scale = self.lumped[self.active].sum() / diagonal[self.active].sum()
+            target = np.where(self.active, scale * diagonal, 1.0)
+        self.matrix = ((1.0 - self.blend) * self.matrix + self.blend * sp.diags(target)).tocsr()
+        self._inverse_diagonal = 1.0 / self.matrix.diagonal()
+        self._factors = _factor(self.matrix) if self._direct else None
+        self._blended = True
+        self.blended_steps += 1
+
+
+#: a pivot this small against its own diagonal entry means singular
+PIVOT_RATIO = 1e-10
+
+
+def _factor(matrix: sp.csr_matrix):
+    """SuperLU factors of a symmetric matrix, or None if it is singular.
+
+    SuperLU does not warn on a numerically singular matrix; its smallest
+    pivot does tell (in symmetric mode the pivots are the diagonal of an
+    LDL^T-like factorization, bounded below by the smallest eigenvalue).
+    """
+    try:
+        factors = spla.splu(matrix.tocsc(), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+    except RuntimeError:  # "Factor is exactly singular"
+        return None
+    # pivot k against its own diagonal entry: ~1 for an independent node of
+    # any mass, ~1e-16 for a node whose function the others reproduce
+    order = np.empty_like(factors.perm_c)
+    order[factors.perm_c] = np.arange(len(order))
+    if np.min(np.abs(factors.U.diagonal()) / matrix.diagonal()[order]) < PIVOT_RATIO:
+        return None
+    return factors
+
+
+def _direct_solve(factors, matrix: sp.csr_matrix, rhs: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Solve with the factors and check the backward error."""
+    if factors is None:
+        return np.zeros_like(rhs), False
+    solution = factors.solve(rhs)
+    residual = np.linalg.norm(matrix @ solution - rhs, axis=0)
+    scale = np.linalg.norm(rhs, axis=0) + matrix.diagonal().max() * np.linalg.norm(solution, axis=0)
+    converged = bool(np.all(np.isfinite(solution)) and np.all(residual <= 1e-10 * scale))
+    return solution, converged
+
+
+def _active(N: sp.csr_matrix, m_p: np.ndarray, lumped: np.ndarray, reference_mass: float) -> np.ndarray:
+    """Nodes whose lumped mass can be divided by.
+
+    Empty nodes are not.  With negative shape functions (q2, serendipity) a
+    node's mass can also pass through zero by cancellation while points
+    still touch it; there ``p_i / m_i`` is round-off over round-off, so a
+    node whose mass is below 1e-6 of its absolute mass ``sum m_p |N_ip|``
+    is not active either (its solution is zero, as for empty nodes).
+    """
+    absolute = lumped if N.data.min(initial=0.0) >= 0.0 else abs(N).T @ m_p
+    return (np.abs(lumped) > 1e-6 * absolute) & (absolute > 1e-12 * reference_mass)
 
 
 def _lump_couplings(matrix: sp.csr_matrix, weak: np.ndarray) -> sp.csr_matrix:

@@ -268,3 +268,11 @@ def _dotted(location) -> str:
         else:
             parts.append(("." if parts else "") + str(item))
     return "".join(parts)
+
+
+def bundled_scene(name: str) -> Scene:
+    """One of the scenes shipped with the package (``femgrid_mpm/scenes/NAME.toml``,
+    also reachable as ``scenes/`` at the repository's top level)."""
+    from pathlib import Path
+
+    return load_scene(Path(__file__).parent / "scenes" / f"{name}.toml")

@@ -172,8 +172,13 @@ class Simulation:
             raise self._stop(f"a particle left the grid: {error}", "particle_left_grid") from None
         self.mass.assemble(ctx.N, p.mass, p.volume)
         self.negative_mass.check(self.mass.lumped, ctx.step, ctx.time, self.grid.nodes)
-        ctx.momentum = ctx.N.T @ (p.mass[:, None] * p.v)
-        ctx.velocity = self._solve(ctx.momentum, "velocity")
+        # Work in the frame of one point (any frame is the same in exact
+        # arithmetic): a uniform motion then has zero relative velocity and
+        # moves exactly, with no round-off for small or negative masses to amplify.
+        ctx.frame_velocity = p.v[0].copy()
+        relative_momentum = ctx.N.T @ (p.mass[:, None] * (p.v - ctx.frame_velocity))
+        ctx.momentum = relative_momentum + self.mass.lumped[:, None] * ctx.frame_velocity
+        ctx.velocity = self._solve(relative_momentum, "velocity") + ctx.frame_velocity
         self._constrain(ctx.velocity)
         return ctx
 
@@ -183,8 +188,9 @@ class Simulation:
         if record:
             self._run(Stage.OBSERVE)
         # 4-6: strain increment from the grid velocity (Eq. 18), then stress (Eq. 6)
-        dv_dx = ctx.dNdx @ ctx.velocity  # (n, 2): d(vx)/dx, d(vy)/dx
-        dv_dy = ctx.dNdy @ ctx.velocity  # (n, 2): d(vx)/dy, d(vy)/dy
+        relative_velocity = ctx.velocity - ctx.frame_velocity  # gradients sum to zero: same gradient
+        dv_dx = ctx.dNdx @ relative_velocity  # (n, 2): d(vx)/dx, d(vy)/dx
+        dv_dy = ctx.dNdy @ relative_velocity  # (n, 2): d(vx)/dy, d(vy)/dy
         strain_increment = dt * np.column_stack([dv_dx[:, 0], dv_dy[:, 1], 0.5 * (dv_dy[:, 0] + dv_dx[:, 1])])
         p.strain += strain_increment
         for material, members in zip(self.materials, self.body_slices):
@@ -201,7 +207,7 @@ class Simulation:
         # 8-10: velocity (Eq. 19) with the new forces, position (Eq. 20) with the
         # grid velocity of time t, density (Eq. 21)
         p.v += dt * (ctx.N @ ctx.acceleration)
-        p.x += dt * (ctx.N @ ctx.velocity)
+        p.x += dt * (ctx.N @ relative_velocity + ctx.frame_velocity)
         p.density *= np.exp(-dt * (dv_dx[:, 0] + dv_dy[:, 1]))
         # 11
         self.step_index += 1

@@ -58,6 +58,7 @@ class BSpline3Basis:
     name: str = "bspline3"
     degree: int = 3
     cells_per_element: int = 1
+    nonnegative: bool = True
 
     def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float) -> Discretization:
         element = ElementBSpline3()
@@ -85,7 +86,7 @@ class BSpline3Basis:
             polynomials=polynomials,
             mesh=skfem.MeshQuad.init_tensor(x, y),
             element=element,
-            nonnegative=True,
+            nonnegative=self.nonnegative,
         )
 
 

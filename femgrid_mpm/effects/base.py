@@ -60,6 +60,8 @@ class StepContext:
     dNdy: Any = None
     momentum: np.ndarray | None = None
     velocity: np.ndarray | None = None
+    #: the frame the step computes in (m/s): grid velocity is frame + relative
+    frame_velocity: np.ndarray | None = None
     force: np.ndarray | None = None
     acceleration: np.ndarray | None = None
     target: np.ndarray | None = None
