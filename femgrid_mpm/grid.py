@@ -246,8 +246,10 @@ class Grid:
         N, dNdx, dNdy : scipy.sparse.csr_matrix, shape (n_points, n_nodes)
             ``N[p, i]`` is node i's function at point p; ``dNdx``, ``dNdy``
             its derivatives (1/m).  Every row has exactly ``n_local`` stored
-            entries (some may be zero), in the element's local order; the
-            three matrices share ``indices`` and ``indptr``.
+            entries (some may be zero), in the element's local order (not
+            sorted by node).  Each matrix owns its index arrays: scipy sorts
+            indices in place in some operations, which would scramble a
+            matrix sharing them.
         """
         element, cell_points = self.locate(points)
         d = self.discretization
@@ -260,8 +262,8 @@ class Grid:
         indptr = np.arange(0, n_points * n_local + 1, n_local, dtype=np.int32)
         shape = (n_points, self.n_nodes)
         return tuple(
-            sp.csr_matrix((data.ravel(), indices, indptr), shape=shape, copy=False)
-            for data in (values, d_xi, d_eta)
+            sp.csr_matrix((data.ravel(), indices if k == 0 else indices.copy(), indptr if k == 0 else indptr.copy()), shape=shape, copy=False)
+            for k, data in enumerate((values, d_xi, d_eta))
         )
 
 

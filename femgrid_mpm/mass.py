@@ -268,7 +268,10 @@ def _active(N: sp.csr_matrix, m_p: np.ndarray, lumped: np.ndarray, reference_mas
     node whose mass is below 1e-6 of its absolute mass ``sum m_p |N_ip|``
     is not active either (its solution is zero, as for empty nodes).
     """
-    absolute = lumped if N.data.min(initial=0.0) >= 0.0 else abs(N).T @ m_p
+    if N.data.min(initial=0.0) >= 0.0:
+        absolute = lumped
+    else:  # a matrix of |N| on N's index arrays, for a transposed product only
+        absolute = sp.csr_matrix((np.abs(N.data), N.indices, N.indptr), shape=N.shape).T @ m_p
     return (np.abs(lumped) > 1e-6 * absolute) & (absolute > 1e-12 * reference_mass)
 
 

@@ -215,3 +215,18 @@ def test_bad_grid_arguments(kwargs, message):
     arguments = dict(basis="q1", lower=(0.0, 0.0), upper=(1.0, 1.0), spacing=0.5) | kwargs
     with pytest.raises(ValueError, match=message):
         Grid(**arguments)
+
+
+@pytest.mark.parametrize("basis", BASIS_NAMES)
+def test_matrices_survive_scipy_operations_on_each_other(basis):
+    """scipy sorts indices in place (e.g. in abs()); no matrix may share index
+    arrays with another (this once scrambled dNdx through abs(N))."""
+    points = random_points(100)
+    grid = make_grid(basis)
+    N, dNdx, dNdy = grid.shape_functions(points)
+    reference = [m.toarray() for m in (N, dNdx, dNdy)]
+    for matrix in (N, dNdx, dNdy):
+        abs(matrix)
+        matrix.sort_indices()
+    for matrix, expected in zip((N, dNdx, dNdy), reference):
+        np.testing.assert_array_equal(matrix.toarray(), expected)
