@@ -66,9 +66,9 @@ class NegativeMassMonitor:
             self.first_step = step
         worst = negative[np.argmin(lumped[negative])]
         message = (
-            f"negative grid mass at step {step} (t = {time:.6g} s): {len(negative)} node(s), "
+            f"step {step} (t = {time:.6g} s): negative grid mass at {len(negative)} node(s), "
             f"the most negative is node {worst} at ({nodes[worst, 0]:g}, {nodes[worst, 1]:g}) "
-            f"with mass ratio {lumped[worst] / self.reference_mass:.3g} of a full cell"
+            f"with {lumped[worst] / self.reference_mass:.3g} of a full cell's mass"
         )
         if not self.applies:
             return

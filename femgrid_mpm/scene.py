@@ -192,14 +192,21 @@ class Scene(_Model):
         return self
 
     def with_overrides(self, **changes) -> "Scene":
-        """A copy with dotted keys replaced, e.g. ``{"grid.basis": "q2"}``; validated again."""
-        data = self.model_dump(mode="python")
+        """A copy with dotted keys replaced, validated again.
+
+        Keys are paths into the scene file, list items by index:
+        ``scene.with_overrides(**{"grid.basis": "q2", "bodies.0.points_per_cell": 4})``.
+        """
+        data = self.model_dump(mode="json", exclude_none=True)
         for dotted, value in changes.items():
             *parents, key = dotted.split(".")
             target = data
             for parent in parents:
-                target = target[parent]
-            target[key] = value
+                target = target[int(parent)] if isinstance(target, list) else target.setdefault(parent, {})
+            if isinstance(target, list):
+                target[int(key)] = value
+            else:
+                target[key] = value
         return Scene.model_validate(data)
 
 
