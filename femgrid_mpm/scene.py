@@ -65,11 +65,18 @@ class GridSpec(_Model):
 
 
 class TimeSpec(_Model):
-    """``[time]``: step ``dt`` (s, or ``"auto"``: ``safety`` x the critical step) and ``end`` (s)."""
+    """``[time]``: step ``dt`` (s, or ``"auto"``: ``safety`` x the critical step) and ``end`` (s).
+
+    ``rest_speed`` (m/s), optional: end the run early, once ``t >= rest_after``
+    (s), when the grid's mass-weighted RMS speed falls below it: the end of a
+    quasi-static (dynamic relaxation) protocol.
+    """
 
     dt: Union[PositiveFloat, Literal["auto"]]
     end: PositiveFloat
     safety: Annotated[float, Field(gt=0, le=1)] = 0.5
+    rest_speed: Union[PositiveFloat, None] = None
+    rest_after: NonNegativeFloat = 0.0
 
 
 class SolverSpec(_Model):
