@@ -20,6 +20,7 @@ Examples
 from __future__ import annotations
 
 import math
+import re
 from typing import Annotated, Literal, Union
 
 from pydantic import (
@@ -172,30 +173,43 @@ class Scene(_Model):
 
     @model_validator(mode="after")
     def _consistent(self):
+        # Each message starts with the key it is about: these checks span
+        # several tables, so pydantic cannot locate them itself.
         names = [body.name for body in self.bodies]
-        duplicates = sorted({n for n in names if names.count(n) > 1})
-        if duplicates:
-            raise ValueError(f"body names must be unique: {duplicates}")
+        for index, name in enumerate(names):
+            if name in names[:index]:
+                raise ValueError(f"bodies[{index}].name: {name!r} is already the name of bodies[{names.index(name)}]")
         for index, load in enumerate(self.loads):
             if isinstance(load, PointLoad) and load.body not in names:
-                raise ValueError(f"loads[{index}] acts on body {load.body!r}, which does not exist (bodies: {names})")
+                raise ValueError(f"loads[{index}].body: there is no body named {load.body!r} (bodies: {', '.join(names)})")
         grid = self.grid
+        # Sizes are counted arithmetically, before anything is allocated.
         width = grid.spacing * BASES[grid.basis].cells_per_element
         nodes = math.prod(math.ceil((u - l) / width) * BASES[grid.basis].cells_per_element + 3 for l, u in zip(grid.lower, grid.upper))
         if nodes > MAX_NODES:
-            raise ValueError(f"the grid would have about {nodes:.3g} nodes, more than the limit of {MAX_NODES:.0e}")
+            raise ValueError(
+                f"grid.spacing: {grid.spacing:g} over [{list(grid.lower)}, {list(grid.upper)}] would make about "
+                f"{nodes:.3g} nodes, more than the limit of {MAX_NODES:.0e}"
+            )
         points = 0
-        for body in self.bodies:
+        for index, body in enumerate(self.bodies):
             if any(bl < gl for bl, gl in zip(body.lower, grid.lower)) or any(bu > gu for bu, gu in zip(body.upper, grid.upper)):
                 raise ValueError(
-                    f"body {body.name!r} [{list(body.lower)}, {list(body.upper)}] lies outside the grid "
+                    f"bodies[{index}]: body {body.name!r} [{list(body.lower)}, {list(body.upper)}] lies outside the grid "
                     f"[{list(grid.lower)}, {list(grid.upper)}]"
                 )
-            points += count_rectangle(body.lower, body.upper, grid.spacing, body.points_per_cell)
+            count = count_rectangle(body.lower, body.upper, grid.spacing, body.points_per_cell)
+            points += count
             if points > MAX_POINTS:
-                raise ValueError(f"the bodies would have more than the limit of {MAX_POINTS:.0e} material points")
+                raise ValueError(
+                    f"bodies[{index}].points_per_cell: body {body.name!r} would have {count:.3g} points, "
+                    f"{points:.3g} in all, more than the limit of {MAX_POINTS:.0e}"
+                )
         for index, support in enumerate(self.supports):
-            compile_expression(support.where, ("x", "y"))
+            try:
+                compile_expression(support.where, ("x", "y"))
+            except ValueError as error:
+                raise ValueError(f"supports[{index}].where: {error}") from None
         return self
 
     def with_overrides(self, **changes) -> "Scene":
@@ -221,13 +235,24 @@ class SceneError(ValueError):
     """A scene file that cannot be used; the message is one line naming file and key."""
 
 
-def load_scene(path) -> Scene:
+def load_scene(path, overrides: dict | None = None) -> Scene:
     """Read and validate a TOML scene file.
+
+    Parameters
+    ----------
+    path : str or Path
+    overrides : dict, optional
+        Dotted keys into the file (list items by index) and their values,
+        set in the file's data before it is validated:
+        ``{"grid.basis": "q2", "bodies.0.points_per_cell": 4}``.
 
     Raises
     ------
     SceneError
-        One line: ``FILE: KEY: problem`` (the first problem found).
+        One line: ``FILE: KEY: problem`` (the first problem found).  Besides
+        pydantic's checks, a value of the wrong TOML type that pydantic
+        would convert (``spacing = "0.5"``, ``spacing = true``,
+        ``particles = 1``) is refused.
     """
     import tomllib
     from pathlib import Path
@@ -243,45 +268,227 @@ def load_scene(path) -> Scene:
     except IsADirectoryError:
         raise SceneError(f"{path}: is a directory, not a scene file") from None
     except tomllib.TOMLDecodeError as error:
-        raise SceneError(f"{path}: not valid TOML: {error}") from None
+        raise SceneError(_one_line(f"{path}: not valid TOML: {error}")) from None
     except (OSError, UnicodeDecodeError) as error:
-        raise SceneError(f"{path}: cannot be read: {error}") from None
+        raise SceneError(_one_line(f"{path}: cannot be read: {error}")) from None
+    source = str(path)
+    if overrides:
+        source += " (with " + ", ".join(f"{key} = {_shown(value)}" for key, value in overrides.items()) + ")"
+        for dotted, value in overrides.items():
+            try:
+                _assign(data, dotted, value)
+            except (KeyError, IndexError, TypeError, ValueError):
+                raise SceneError(f"{source}: {dotted}: no such key to set") from None
     try:
-        return Scene.model_validate(data)
+        scene = Scene.model_validate(data)
     except ValidationError as error:
-        raise SceneError(f"{path}: {describe_validation_error(error)}") from None
+        raise SceneError(_one_line(f"{source}: {describe_validation_error(error)}")) from None
     except ValueError as error:  # raised by our own checks outside pydantic's wrapping
-        raise SceneError(f"{path}: {error}") from None
+        raise SceneError(_one_line(f"{source}: {error}")) from None
+    problem = _converted_value(data, scene.model_dump(), "")
+    if problem:
+        raise SceneError(_one_line(f"{source}: {problem}"))
+    return scene
 
 
 def describe_validation_error(error) -> str:
-    """The first problem of a pydantic ``ValidationError`` as ``key: message``."""
-    first = error.errors(include_url=False)[0]
-    location = _dotted(first["loc"])
-    message = first["msg"].removeprefix("Value error, ")
-    kind = first["type"]
-    if kind == "extra_forbidden":
-        message = "unknown key"
-    elif kind == "missing":
-        message = "required key is missing"
-    elif kind in ("finite_number",):
-        message = "must be a finite number (not NaN or infinity)"
-    text = f"{location}: {message}" if location else message
-    if len(error.errors()) > 1:
-        text += f" (and {len(error.errors()) - 1} more problem(s))"
-    return text.replace("\n", " ")
+    """The first problem of a pydantic ``ValidationError`` as one line ``key: message``.
+
+    Echoes of a problem are dropped (a list "too short" because its only
+    item failed), and the branches of a union at one key (``dt``: a number
+    or ``"auto"``) are merged into one message.  An unknown key is shown
+    with the nearest known one.
+    """
+    errors = error.errors(include_url=False)
+    echoes = [
+        e for e in errors
+        if e["type"] == "too_short" and any(len(o["loc"]) > len(e["loc"]) and o["loc"][: len(e["loc"])] == e["loc"] for o in errors)
+    ]
+    problems = [(_location(e), e) for e in errors if e not in echoes] or [(_location(errors[0]), errors[0])]
+    # an unknown key first: with a misspelt key, "unknown key (did you mean ...)"
+    # says more than the "required key is missing" it also causes
+    problems.sort(key=lambda problem: problem[1]["type"] not in _UNKNOWN_KEY)
+    location, first = problems[0]
+    messages: list[str] = []
+    for where, e in problems:
+        if where != location:
+            continue
+        message = _message(e)
+        if messages and messages[0].startswith("must be ") and message.startswith("must be "):
+            message = message.removeprefix("must be ")
+        if message not in messages:
+            messages.append(message)
+    text = " or ".join(messages)
+    if first["type"] not in ("missing", *_UNKNOWN_KEY, "value_error", "union_tag_invalid", "union_tag_not_found") and isinstance(
+        first.get("input"), (str, int, float, bool)
+    ):
+        text += f" (got {_shown(first['input'])})"
+    text = f"{location}: {text}" if location else text
+    others = len({where for where, _ in problems} - {location})
+    if others:
+        text += f" (and {others} more problem(s))"
+    return _one_line(text)
 
 
-def _dotted(location) -> str:
+#: pydantic's error types for a key that is not a field (models; dataclasses)
+_UNKNOWN_KEY = ("extra_forbidden", "unexpected_keyword_argument")
+#: pydantic's name of a union branch or validator in a location: not a key
+_BRANCH = re.compile(r"^(constrained-\w+|function-\w+\[.*|[\w-]+\[.*\]|int|float|str|bool|none)$")
+
+
+def _location(error: dict) -> str:
+    location = error["loc"]
+    if error["type"] in ("union_tag_invalid", "union_tag_not_found"):
+        location = (*location, error.get("ctx", {}).get("discriminator", "'kind'").strip("'"))
+    return _dotted(location, keep_last=error["type"] in _UNKNOWN_KEY)
+
+
+def _dotted(location, keep_last: bool = False) -> str:
     parts = []
-    for item in location:
+    for position, item in enumerate(location):
+        last = position == len(location) - 1
         if isinstance(item, int):
             parts.append(f"[{item}]")
-        elif item in LOAD_KINDS or "[" in str(item) or "(" in str(item):
+        elif not (keep_last and last) and (item in LOAD_KINDS or _BRANCH.match(str(item))):
             continue  # discriminator tags and validator/type names are not keys
         else:
             parts.append(("." if parts else "") + str(item))
     return "".join(parts)
+
+
+def _message(error: dict) -> str:
+    kind, context = error["type"], error.get("ctx", {})
+    if kind in _UNKNOWN_KEY:
+        return "unknown key" + _known_keys_hint(error["loc"])
+    if kind == "union_tag_not_found" or (kind == "missing" and not isinstance(error["loc"][-1], int)):
+        return "required key is missing"
+    if kind == "finite_number":
+        return "must be a finite number (not NaN or infinity)"
+    if kind == "union_tag_invalid":
+        return f"unknown kind {_shown(context.get('tag'))} (expected {context.get('expected_tags')})"
+    if kind in ("float_parsing", "int_parsing", "float_type", "int_type", "int_from_float"):
+        return "must be a whole number" if kind.startswith("int") else "must be a number"
+    if kind == "missing" and isinstance(error["loc"][-1], int):
+        return "missing: the array is too short"
+    if kind in ("too_long", "too_short") and "actual_length" in context:
+        limit = context.get("max_length" if kind == "too_long" else "min_length")
+        return f"must have {'at most' if kind == 'too_long' else 'at least'} {limit} item(s), not {context['actual_length']}"
+    if kind in ("model_type", "dataclass_type", "dict_type", "model_attributes_type", "dataclass_exact_type"):
+        return "must be a table"
+    if kind in ("tuple_type", "list_type"):
+        return "must be an array"
+    message = error["msg"].removeprefix("Value error, ").removeprefix("Assertion failed, ")
+    if message.startswith("Input should be "):
+        message = "must be " + message.removeprefix("Input should be ")
+    return message
+
+
+def _known_keys_hint(location) -> str:
+    """`` (did you mean 'spacing'?)`` or `` (known keys: ...)`` for an unknown key; "" if unresolvable."""
+    import difflib
+    import typing
+
+    node: object = Scene
+    for item in location[:-1]:
+        while typing.get_origin(node) is Annotated:
+            node = typing.get_args(node)[0]
+        if typing.get_origin(node) is Union:
+            members = [m for m in typing.get_args(node) if m is not type(None)]
+            # a discriminated union's location names the tag: the member whose ``kind`` it is
+            tagged = [m for m in members if item in typing.get_args(_fields(m).get("kind", None) or ())]
+            node = tagged[0] if tagged else members[0] if len(members) == 1 else None
+            if tagged:
+                continue
+            while typing.get_origin(node) is Annotated:
+                node = typing.get_args(node)[0]
+        if isinstance(item, int) and typing.get_origin(node) is tuple:
+            arguments = typing.get_args(node)
+            node = arguments[0] if len(arguments) == 2 and arguments[1] is Ellipsis else None
+        elif isinstance(item, str) and item in _fields(node):
+            node = _fields(node)[item]
+        else:
+            return ""
+    while typing.get_origin(node) in (Annotated, Union):
+        members = [m for m in typing.get_args(node) if m is not type(None)]
+        node = members[0] if typing.get_origin(node) is Annotated or len(members) == 1 else None
+    known = list(_fields(node))
+    if not known:
+        return ""
+    close = difflib.get_close_matches(str(location[-1]), known, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else f" (known keys: {', '.join(known)})"
+
+
+def _fields(node) -> dict:
+    """Field name -> annotation of a pydantic model or dataclass; {} for anything else."""
+    fields = getattr(node, "model_fields", None) or getattr(node, "__pydantic_fields__", None)
+    if not isinstance(fields, dict):
+        return {}
+    return {name: info.annotation for name, info in fields.items()}
+
+
+def _converted_value(raw, validated, location: str) -> str | None:
+    """The first value pydantic converted across TOML types, as ``key: message``.
+
+    pydantic's lax mode turns ``"0.5"`` and ``true`` into numbers and ``1``
+    into ``true``; in a scene file those are mistakes.  ``raw`` is the file's
+    data, ``validated`` the model dumped to Python; containers that differ
+    in shape are not compared.
+    """
+    if isinstance(raw, dict) and isinstance(validated, dict):
+        for key, value in raw.items():
+            if key in validated:
+                problem = _converted_value(value, validated[key], f"{location}.{key}" if location else key)
+                if problem:
+                    return problem
+        return None
+    if isinstance(raw, list) and isinstance(validated, (list, tuple)):
+        for index, (item, checked) in enumerate(zip(raw, validated)):
+            problem = _converted_value(item, checked, f"{location}[{index}]")
+            if problem:
+                return problem
+        return None
+    if isinstance(validated, bool) and not isinstance(raw, bool):
+        return f"{location}: must be true or false (got {_shown(raw)})"
+    is_number = isinstance(validated, (int, float)) and not isinstance(validated, bool)
+    if is_number and (isinstance(raw, (str, bool)) or not isinstance(raw, (int, float))):
+        return f"{location}: must be a number (got {_shown(raw)})"
+    return None
+
+
+def _assign(data: dict, dotted: str, value) -> None:
+    """Set ``data[a][b][0][c] = value`` for ``dotted = "a.b.0.c"``, creating missing tables."""
+    *parents, key = dotted.split(".")
+    target = data
+    for parent in parents:
+        if isinstance(target, list):
+            target = target[int(parent)]
+        elif isinstance(target, dict):
+            target = target.setdefault(parent, {})
+        else:
+            raise KeyError(dotted)
+    if isinstance(target, list):
+        target[int(key)] = value
+    elif isinstance(target, dict) and key:
+        target[key] = value
+    else:
+        raise KeyError(dotted)
+
+
+def _shown(value) -> str:
+    """A value as it would be written in TOML (``true``, ``"q3"``, ``nan``)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        import json
+
+        return json.dumps(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+    return repr(value)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split("\n"))
 
 
 def bundled_scene(name: str) -> Scene:
