@@ -1,36 +1,333 @@
-"""The ``femgrid-mpm`` command line."""
+"""The ``femgrid-mpm`` command line: ``run``, ``info`` and ``reproduce``.
+
+Exit codes (:data:`EXIT_CODES`): 0 done; 2 bad input (a scene file, an
+argument, an output directory that cannot be written), reported as one line
+naming the file and the key, never a traceback, before anything is written;
+3 the simulation stopped on a numerical event (negative mass under policy
+``"error"``, a singular consistent mass, NaN, a particle leaving the grid),
+with every output written so far kept valid; 1 the outputs could not be
+written during the run (e.g. a full disk); 130 interrupted (Ctrl-C), outputs
+so far kept.  The library raises; only this module exits.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
+import warnings
+from pathlib import Path
+
+PROG = "femgrid-mpm"
+EXIT_DONE = 0
+EXIT_WRITE_FAILED = 1
+EXIT_BAD_INPUT = 2
+EXIT_STOPPED = 3
+EXIT_INTERRUPTED = 130
+EXIT_CODES = {
+    EXIT_DONE: "done",
+    EXIT_WRITE_FAILED: "the outputs could not be written during the run",
+    EXIT_BAD_INPUT: "bad input: a scene file, an argument or an output directory",
+    EXIT_STOPPED: "the simulation stopped on a numerical event; the outputs so far are valid",
+    EXIT_INTERRUPTED: "interrupted; the outputs so far are valid",
+}
+
+
+class BadInput(Exception):
+    """Input the run cannot use; the message is one line naming the file and the key."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors (exit code 2) instead of usage + error."""
+
+    def error(self, message):
+        self.exit(EXIT_BAD_INPUT, f"{PROG}: error: {message} (see {self.prog} --help)\n")
+
+
+def _parser() -> argparse.ArgumentParser:
+    from .bases import BASES
+
+    parser = _Parser(
+        prog=PROG,
+        description="Material point method in 2D on finite-element background grids.",
+        epilog="Exit codes: " + "; ".join(f"{code} {meaning}" for code, meaning in EXIT_CODES.items()) + ".",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="{run,info,reproduce}")
+
+    def scene_arguments(command):
+        command.add_argument("scene", metavar="SCENE.toml", help="the scene file")
+        command.add_argument("--basis", choices=list(BASES), help="override [grid] basis")
+        command.add_argument("--mass", choices=["lumped", "consistent"], help="override [solver] mass")
+        command.add_argument(
+            "--set",
+            dest="settings",
+            action="append",
+            default=[],
+            metavar="KEY=VALUE",
+            help="override any key, dotted, list items by index, the value in TOML "
+            "(bare words are strings): --set time.end=1 --set bodies.0.points_per_cell=4 (repeatable)",
+        )
+
+    run = commands.add_parser("run", help="run a scene and write its outputs to --out")
+    scene_arguments(run)
+    run.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar (it is shown only when stderr is a terminal)")
+
+    info = commands.add_parser("info", help="check a scene and print what a run would do")
+    scene_arguments(info)
+
+    reproduce = commands.add_parser("reproduce", help="run the paper's cases and write every figure and table")
+    reproduce.add_argument("--out", default="results", metavar="DIR", help="output directory (default: results)")
+    reproduce.add_argument("--case", action="append", default=[], metavar="NAME", help="only this case (repeatable; default: all)")
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="femgrid-mpm", description="Material point method on finite-element grids.")
-    commands = parser.add_subparsers(dest="command", required=True)
-    reproduce = commands.add_parser("reproduce", help="run the paper's cases and write every figure and table")
-    reproduce.add_argument("--out", default="results", help="output directory (default: results)")
-    args = parser.parse_args(argv)
-    if args.command == "reproduce":
-        return _reproduce(args.out)
-    return 2
+    """Run the command line; returns the exit code (see :data:`EXIT_CODES`)."""
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as exit_:  # --help (0) or a usage error (2, printed as one line)
+        return exit_.code if isinstance(exit_.code, int) else EXIT_BAD_INPUT
+    handlers = {"run": _run, "info": _info, "reproduce": _reproduce}
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        try:
+            return handlers[args.command](args)
+        except BadInput as error:
+            _say("error", str(error))
+            return EXIT_BAD_INPUT
 
 
-def _reproduce(out: str) -> int:
-    import warnings
-    from pathlib import Path
+def _say(kind: str, message: str) -> None:
+    """One line on stderr: ``femgrid-mpm: KIND: message``."""
+    print(f"{PROG}: {kind}: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
 
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    _say("warning", str(message))
+
+
+# -- building a scene from the arguments -------------------------------------------------
+
+
+def _overrides(args) -> dict:
+    """``--basis``, ``--mass`` and ``--set KEY=VALUE`` as dotted keys for :func:`load_scene`."""
+    import tomllib
+
+    overrides = {}
+    for setting in args.settings:
+        key, equals, text = setting.partition("=")
+        key = key.strip()
+        if not equals or not key:
+            raise BadInput(f"--set {setting}: expected KEY=VALUE, e.g. --set time.end=1.5")
+        try:
+            value = tomllib.loads(f"value = {text.strip()}")["value"]
+        except tomllib.TOMLDecodeError:
+            value = text.strip()  # a bare word: a string (--set grid.basis=q2)
+        overrides[key] = value
+    if args.basis:
+        overrides["grid.basis"] = args.basis
+    if args.mass:
+        overrides["solver.mass"] = args.mass
+    return overrides
+
+
+def _load(args):
+    """The scene of the arguments, validated; raises :class:`BadInput`."""
+    from .scene import SceneError, load_scene
+
+    overrides = _overrides(args)
+    try:
+        return load_scene(args.scene, overrides), overrides
+    except SceneError as error:
+        raise BadInput(str(error)) from None
+
+
+def _build(scene, path, observers):
+    """The :class:`Simulation`, with the checks that need it built; raises :class:`BadInput`.
+
+    Building selects support nodes and seeds points; a support that selects
+    no node, ``dt = "auto"`` without a stable step or an initial velocity that
+    evaluates to NaN are problems of the scene file.
+    """
+    import numpy as np
+
+    from .solver import Simulation
+
+    try:
+        simulation = Simulation(scene, observers=observers)
+    except MemoryError:
+        raise BadInput(f"{path}: the scene does not fit in this machine's memory") from None
+    except ValueError as error:
+        raise BadInput(f"{path}: {_key_of_build_error(scene, str(error))}{error}") from None
+    velocity = simulation.particles.v
+    bad = ~np.isfinite(velocity).all(axis=1)
+    if bad.any():
+        first = int(np.argmax(bad))
+        body = int(simulation.particles.body[first])
+        x, y = simulation.particles.x[first]
+        raise BadInput(
+            f"{path}: bodies[{body}].velocity: gives NaN or infinity at {int(bad.sum())} point(s), "
+            f"the first at ({x:g}, {y:g})"
+        )
+    return simulation
+
+
+def _key_of_build_error(scene, message: str) -> str:
+    """``"KEY: "`` for the errors building a simulation is known to raise, else ``""``.
+
+    The library's messages name the value (``support where = 'x < -1'
+    selects no grid node``); the command line adds the key in the file.
+    """
+    if scene.time.dt == "auto" and "auto" in message:
+        return "time.dt: "
+    for index, support in enumerate(scene.supports):
+        if repr(support.where) in message:
+            return f"supports[{index}].where: "
+    return ""
+
+
+def _warn_time_step(simulation) -> None:
+    dt, critical = simulation.dt, simulation.critical_dt
+    if critical <= 0:
+        warnings.warn(
+            f"{simulation.scene.grid.basis} with {simulation.scene.solver.mass} mass has no stable time step "
+            "(negative lumped masses): expect the run to grow unboundedly",
+            RuntimeWarning,
+        )
+    elif dt > critical:
+        warnings.warn(
+            f"dt = {dt:.6g} s exceeds the estimated critical time step {critical:.6g} s: the run will likely blow up",
+            RuntimeWarning,
+        )
+
+
+# -- info --------------------------------------------------------------------------------
+
+
+def _info(args) -> int:
+    """Print what a run of the scene would do: counts, active effects, time steps."""
+    from .output import declared_observers
+
+    scene, overrides = _load(args)
+    simulation = _build(scene, args.scene, declared_observers(scene, Path(".")))
+    bodies = ", ".join(
+        f"{body.name} {members.stop - members.start}" for body, members in zip(scene.bodies, simulation.body_slices)
+    )
+    grid = scene.grid
+    lines = {
+        "title": scene.title,
+        "scene": args.scene + (" (with " + ", ".join(f"{k} = {v!r}" for k, v in overrides.items()) + ")" if overrides else ""),
+        "basis": grid.basis,
+        "mass": scene.solver.mass,
+        "grid": f"[{grid.lower[0]:g}, {grid.lower[1]:g}] to [{simulation.grid.upper[0]:g}, {simulation.grid.upper[1]:g}], spacing {grid.spacing:g} m",
+        "points": f"{simulation.particles.n} ({bodies})",
+        "nodes": str(simulation.grid.n_nodes),
+        "effects": ", ".join(["internal_force (always)", *simulation.active_effects]),
+        "dt": f"{simulation.dt:.6g} s" + (" (auto)" if scene.time.dt == "auto" else ""),
+        "critical_dt": f"{simulation.critical_dt:.6g} s (estimated)",
+        "steps": f"{simulation.n_steps} to t = {scene.time.end:g} s",
+        "records": f"every {simulation.every} steps" if simulation.every else "none (no [output])",
+    }
+    width = max(map(len, lines)) + 1
+    for key, value in lines.items():
+        print(f"{key + ':':<{width}} {value}")
+    _warn_time_step(simulation)
+    return EXIT_DONE
+
+
+# -- run ---------------------------------------------------------------------------------
+
+
+def _run(args) -> int:
+    """Run a scene into ``--out``; see the module docstring for the exit codes."""
+    from .diagnostics import SimulationStopped
+    from .output import RunOutputs
+
+    scene, overrides = _load(args)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise BadInput(f"--out {out}: exists and is not a directory")
+    outputs = RunOutputs(out, scene, source=args.scene, overrides=overrides)
+    simulation = _build(scene, args.scene, outputs.observers)
+    try:
+        source_bytes = Path(args.scene).read_bytes()
+    except OSError as error:
+        raise BadInput(f"{args.scene}: cannot be read: {error.strerror}") from None
+    _warn_time_step(simulation)
+    try:
+        outputs.start(simulation, source_bytes)
+    except OSError as error:
+        raise BadInput(f"--out {out}: cannot write there: {error.strerror or error}") from None
+
+    bar, progress = _progress_bar(simulation, enabled=not args.no_progress and sys.stderr.isatty())
+    try:
+        try:
+            result = simulation.run(progress=progress)
+        finally:
+            if bar is not None:
+                bar.close()
+        outputs.finish(result)
+    except SimulationStopped as stop:
+        outputs.finish(stop.result, stop)
+        _say("stopped", f"{stop}; the outputs so far are in {out}")
+        return EXIT_STOPPED
+    except KeyboardInterrupt:
+        outputs.finish(simulation.result("interrupted", f"interrupted at step {simulation.step_index} (t = {simulation.time:.6g} s)"))
+        _say("interrupted", f"at step {simulation.step_index} (t = {simulation.time:.6g} s); the outputs so far are in {out}")
+        return EXIT_INTERRUPTED
+    except OSError as error:
+        _say("error", f"cannot write the outputs in {out}: {error}")
+        return EXIT_WRITE_FAILED
+    print(f"{result.message}: {simulation.step_index} steps in {simulation.wall_time:.3g} s; outputs in {out}")
+    return EXIT_DONE
+
+
+def _progress_bar(simulation, enabled: bool):
+    """A tqdm bar of steps, simulated time and ETA on stderr, and its update callback; (None, None) if not enabled."""
+    if not enabled:
+        return None, None
+    from tqdm import tqdm
+
+    end = simulation.n_steps * simulation.dt
+    bar = tqdm(
+        total=simulation.n_steps,
+        unit="step",
+        file=sys.stderr,
+        dynamic_ncols=True,
+        bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} steps, {postfix} [{elapsed}<{remaining}]",
+    )
+    bar.set_postfix_str(f"t = 0/{end:.4g} s", refresh=False)
+
+    def progress(step: int, time: float) -> None:
+        bar.set_postfix_str(f"t = {time:.4g}/{end:.4g} s", refresh=False)
+        bar.update(step - bar.n)
+
+    return bar, progress
+
+
+# -- reproduce ---------------------------------------------------------------------------
+
+
+def _reproduce(args) -> int:
+    """Run the paper's cases (:data:`femgrid_mpm.reproduce.CASES`) into ``--out``."""
     from .reproduce import CASES
 
+    unknown = [name for name in args.case if name not in CASES]
+    if unknown:
+        raise BadInput(f"--case {unknown[0]}: no such case (cases: {', '.join(CASES)})")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise BadInput(f"--out {out}: exists and is not a directory")
     warnings.simplefilter("ignore")  # expected events (negative masses under "warn") are in the tables
     for name, run in CASES.items():
+        if args.case and name not in args.case:
+            continue
         print(f"{name} ...", file=sys.stderr, flush=True)
-        run(Path(out) / name)
-        table = Path(out) / name / "table.md"
+        run(out / name)
+        table = out / name / "table.md"
         if table.exists():
             print(table.read_text())
-    return 0
+    return EXIT_DONE
 
 
 if __name__ == "__main__":  # pragma: no cover
