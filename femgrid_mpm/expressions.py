@@ -182,8 +182,11 @@ class _Compiler:
         return compare
 
     def visit_Call(self, node: ast.Call) -> Evaluator:
-        if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS:
-            name = node.func.id if isinstance(node.func, ast.Name) else _describe(node.func)
+        if not isinstance(node.func, ast.Name):
+            # e.g. __import__('os').getcwd(): name what is called, not "name 'attribute access'"
+            raise self.fail("calling the result of a call" if isinstance(node.func, ast.Call) else _describe(node.func))
+        if node.func.id not in FUNCTIONS:
+            name = node.func.id
             raise ExpressionError(
                 f"name {name!r} is not allowed in expression {self.text!r} (allowed: {self.allowed})"
             )
