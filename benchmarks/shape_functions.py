@@ -18,7 +18,7 @@ from femgrid_mpm import Grid  # noqa: E402
 from femgrid_mpm.bases import BASES  # noqa: E402
 
 SIZES = (1_000, 10_000, 100_000)
-TARGET = {"q1": 150, "q2": 150, "serendipity": 150, "bspline3": 300}
+TARGET = {"q1": 150, "q2": 150, "serendipity": 150, "bspline3": 300, "bspline3_open": 300}
 
 
 def time_per_particle(grid, points, repeats):

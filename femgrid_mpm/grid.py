@@ -253,7 +253,7 @@ class Grid:
         """
         element, cell_points = self.locate(points)
         d = self.discretization
-        values, d_xi, d_eta = d.polynomials.evaluate(cell_points)
+        values, d_xi, d_eta = d.local_basis.evaluate(cell_points, element)
         inverse_width = 1.0 / d.element_width
         d_xi *= inverse_width
         d_eta *= inverse_width

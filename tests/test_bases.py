@@ -230,3 +230,32 @@ def test_matrices_survive_scipy_operations_on_each_other(basis):
         matrix.sort_indices()
     for matrix, expected in zip((N, dNdx, dNdy), reference):
         np.testing.assert_array_equal(matrix.toarray(), expected)
+
+
+def test_open_knot_splines_interpolate_at_the_boundary():
+    """On the domain's edge only the edge node's function is non-zero, and it is 1:
+    fixing the nodes on x <= 0 holds the wall exactly (the paper's ghost column does not)."""
+    grid = Grid("bspline3_open", (0.0, 0.0), (3.0, 2.0), 0.5)
+    rng = np.random.default_rng(5)
+    wall = np.column_stack([np.zeros(20), rng.uniform(0.0, 2.0, 20)])
+    N, _, _ = grid.shape_functions(wall)
+    on_wall = grid.nodes_where("x <= 0")
+    np.testing.assert_allclose(N[:, on_wall].sum(axis=1), 1.0, atol=1e-13)
+    off_wall = np.setdiff1d(np.arange(grid.n_nodes), on_wall)
+    assert np.abs(N[:, off_wall]).max() < 1e-13
+    ghost = Grid("bspline3", (0.0, 0.0), (3.0, 2.0), 0.5)
+    N_ghost, _, _ = ghost.shape_functions(wall)
+    assert N_ghost[:, ghost.nodes_where("x <= 0")].sum(axis=1).max() < 0.9  # 1/6 left to the next column
+
+
+def test_open_knot_splines_equal_uniform_ones_in_the_interior():
+    """Three or more cells from every boundary both variants are Eq. 23."""
+    open_grid = Grid("bspline3_open", (0.0, 0.0), (5.0, 4.0), 0.5)
+    ghost_grid = Grid("bspline3", (0.0, 0.0), (5.0, 4.0), 0.5)
+    rng = np.random.default_rng(6)
+    points = np.array([1.5, 1.5]) + rng.random((50, 2)) * [2.0, 1.0]
+    for a, b in zip(open_grid.shape_functions(points), ghost_grid.shape_functions(points)):
+        np.testing.assert_allclose(a.toarray(), b.toarray(), atol=1e-13)
+    interior = "(x > 1) and (x < 4) and (y > 1) and (y < 3)"
+    np.testing.assert_array_equal(open_grid.nodes[open_grid.nodes_where(interior)],
+                                  ghost_grid.nodes[ghost_grid.nodes_where(interior)])

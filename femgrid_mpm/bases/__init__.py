@@ -7,20 +7,22 @@ Discretization`` (see ``finite_element.py`` for scikit-fem elements and
 The property tests in ``tests/test_bases.py`` loop over this registry.
 """
 
-from .bspline3 import BSPLINE3, ElementBSpline3, cubic_spline
+from .bspline3 import BSPLINE3, BSPLINE3_OPEN, ElementBSpline3, TensorSplines, cubic_spline
 from .finite_element import Q1, Q2, SERENDIPITY, FiniteElementBasis
 from .lattice import Discretization
 from .polynomial import LocalPolynomials
 
-BASES = {builder.name: builder for builder in (Q1, Q2, SERENDIPITY, BSPLINE3)}
+BASES = {builder.name: builder for builder in (Q1, Q2, SERENDIPITY, BSPLINE3, BSPLINE3_OPEN)}
 
 __all__ = [
     "BASES",
     "BSPLINE3",
+    "BSPLINE3_OPEN",
     "Discretization",
     "ElementBSpline3",
     "FiniteElementBasis",
     "LocalPolynomials",
+    "TensorSplines",
     "Q1",
     "Q2",
     "SERENDIPITY",

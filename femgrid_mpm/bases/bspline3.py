@@ -1,18 +1,31 @@
-"""Tensor-product uniform cubic B-splines (paper Eq. 23) on the MPM lattice.
+"""Tensor-product cubic B-splines (paper Eq. 23) on the MPM lattice, two boundary treatments.
 
-Boundary treatment (the paper's): a cubic B-spline node influences points up
-to two spacings away, so a point in a cell next to the domain boundary needs
-one node outside the domain.  The grid therefore carries one extra column
+A cubic B-spline influences points up to two spacings away, so the 16
+functions that are non-zero on a cell belong to the nodes one step below to
+two steps above it in each direction; ``n`` cells carry ``n + 3`` functions
+per direction.  The two variants differ in the functions near the boundary:
+
+``bspline3`` (the paper's): uniform splines everywhere, with one extra column
 (and row) of nodes beyond each side of the domain, at ``lower - spacing`` and
-``upper + spacing``.  Every point inside the domain then has its full
-16-node stencil, partition of unity and linear completeness hold up to the
-boundary, and a rigid wall is imposed by fixing the velocities of the
-boundary nodes *and* of the extra column beyond it (a support written as
-``x <= 0`` selects both, since the extra column lies at ``x = -spacing``).
+``upper + spacing``.  Every point inside the domain has its full 16-node
+stencil; partition of unity and linear completeness hold up to the boundary.
+A rigid wall fixes the boundary nodes *and* the extra column (``x <= 0``
+selects both).  Fixing them is not exact: the third node's function is 1/6
+on the wall, so the wall itself still moves with that node.
+
+``bspline3_open``: an open ("clamped") knot vector, the first and last knots
+repeated four times.  Interior cells (three or more from a boundary) have the
+same functions as ``bspline3``; the cells next to a boundary have modified
+ones, and on the boundary only the boundary node's function is non-zero
+(equal to 1), so fixing the nodes on ``x <= 0`` holds the wall exactly.  The
+nodes are the functions' Greville abscissae: on the lattice except the
+second and second-to-last per direction, which sit a third of a spacing
+from the boundary.  Linear functions are still reproduced exactly.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,28 +64,132 @@ class ElementBSpline3:
         return fx * fy, np.array([dfx * fy, fx * dfy])
 
 
+def open_knot_tables(n_cells: int) -> np.ndarray:
+    """Per-cell monomial coefficients for an open knot vector, shape (n_cells, 4, 4).
+
+    Knots ``0, 0, 0, 0, 1, ..., n - 1, n, n, n, n`` (in spacings); cell ``j``
+    carries functions ``j .. j + 3``.  The pieces are sampled from scipy's
+    B-spline evaluation at four points per cell and fitted (exact for cubics).
+    """
+    from scipy.interpolate import BSpline
+
+    knots = np.concatenate([[0.0] * 3, np.arange(n_cells + 1.0), [float(n_cells)] * 3])
+    samples = np.array([0.1, 0.4, 0.6, 0.9])  # inside the cell: each belongs to its piece
+    vandermonde = np.vander(samples, 4, increasing=True)
+    tables = np.empty((n_cells, 4, 4))
+    for cell in range(n_cells):  # once per grid, at set-up
+        design = BSpline.design_matrix(cell + samples, knots, 3).toarray()[:, cell : cell + 4]
+        tables[cell] = np.linalg.solve(vandermonde, design)
+    return tables
+
+
+def greville_abscissae(n_cells: int, knots: str) -> np.ndarray:
+    """Node positions in spacings from the lower boundary, shape (n_cells + 3,)."""
+    if knots == "ghost":
+        return np.arange(-1.0, n_cells + 2.0)
+    positions = np.arange(-1.0, n_cells + 2.0)
+    positions[[0, 1]] = [0.0, 1.0 / 3.0]
+    positions[[-2, -1]] = [n_cells - 1.0 / 3.0, float(n_cells)]
+    return positions
+
+
+@dataclass(frozen=True)
+class TensorSplines:
+    """Cubic B-spline values on cells: the 1D pieces of each direction, multiplied.
+
+    Attributes
+    ----------
+    tables : (ndarray, ndarray)
+        Per-cell monomial coefficients along x and along y, each shape
+        (n_cells, 4 powers, 4 functions).
+    n_cells_y : int
+        Cells along y, to split an element index ``ix * n_cells_y + iy``.
+    """
+
+    tables: tuple[np.ndarray, np.ndarray]
+    n_cells_y: int
+
+    @property
+    def n_local(self) -> int:
+        return 16
+
+    @functools.cached_property
+    def _interior(self) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+        """Per direction: the interior piece, and which cells have another one."""
+        result = []
+        for table in self.tables:
+            interior = np.ascontiguousarray(table[len(table) // 2])
+            special = np.any(np.abs(table - interior) > 1e-14, axis=(1, 2))
+            result.append((interior, special))
+        return tuple(result)
+
+    def evaluate(self, cell_points: np.ndarray, element: np.ndarray):
+        """Values and cell-coordinate derivatives, each shape (n, 16), function ``4 a + b``."""
+        ix, iy = np.divmod(element, self.n_cells_y)
+        fx, dfx = self._one_direction(0, ix, cell_points[:, 0])
+        fy, dfy = self._one_direction(1, iy, cell_points[:, 1])
+        n = len(cell_points)
+        values = (fx[:, :, None] * fy[:, None, :]).reshape(n, 16)
+        d_xi = (dfx[:, :, None] * fy[:, None, :]).reshape(n, 16)
+        d_eta = (fx[:, :, None] * dfy[:, None, :]).reshape(n, 16)
+        return values, d_xi, d_eta
+
+    def _one_direction(self, axis: int, cell: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """1D values and derivatives of the four functions of each point's cell.
+
+        All points get the interior piece by one matrix product; only points
+        in cells with another piece (next to an open boundary) are redone.
+        """
+        interior, special = self._interior[axis]
+        powers = np.empty((len(s), 4))
+        slopes = np.empty((len(s), 4))
+        powers[:, 0] = 1.0
+        powers[:, 1] = s
+        np.multiply(s, s, out=powers[:, 2])
+        np.multiply(powers[:, 2], s, out=powers[:, 3])
+        slopes[:, 0] = 0.0
+        slopes[:, 1] = 1.0
+        np.multiply(s, 2.0, out=slopes[:, 2])
+        np.multiply(powers[:, 2], 3.0, out=slopes[:, 3])
+        values = powers @ interior
+        derivatives = slopes @ interior
+        special_cells = np.flatnonzero(special)
+        if len(special_cells):
+            # special cells are the first and last three: two cheap comparisons find their points
+            n_cells = len(special)
+            rows = np.flatnonzero((cell < 3) | (cell >= n_cells - 3))
+            for special_cell in special_cells:  # at most six per direction
+                sub = rows[cell[rows] == special_cell]
+                values[sub] = powers[sub] @ self.tables[axis][special_cell]
+                derivatives[sub] = slopes[sub] @ self.tables[axis][special_cell]
+        return values, derivatives
+
+
 @dataclass(frozen=True)
 class BSpline3Basis:
-    """Cubic B-splines with one extra column of nodes beyond each boundary."""
+    """Cubic B-splines on the lattice; ``knots`` is ``"ghost"`` (the paper's) or ``"open"``."""
 
     name: str = "bspline3"
+    knots: str = "ghost"
     degree: int = 3
     cells_per_element: int = 1
     nonnegative: bool = True
 
     def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float) -> Discretization:
         element = ElementBSpline3()
-        nx, ny = n_elements[0] + 3, n_elements[1] + 3  # nodes per direction, ghosts included
-        i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
-        # node (i, j) sits at lower + (i - 1, j - 1) * spacing; index i * ny + j
-        nodes = lower + (np.column_stack([i.ravel(), j.ravel()]) - 1) * spacing
+        nx, ny = n_elements[0] + 3, n_elements[1] + 3  # functions per direction
+        positions = [greville_abscissae(n, self.knots) for n in n_elements]
+        gx, gy = np.meshgrid(lower[0] + spacing * positions[0], lower[1] + spacing * positions[1], indexing="ij")
+        nodes = np.column_stack([gx.ravel(), gy.ravel()])  # node (i, j) has index i * ny + j
         ix, iy = np.meshgrid(np.arange(n_elements[0]), np.arange(n_elements[1]), indexing="ij")
-        # cell (ix, iy)'s lower-left node has lattice index (ix + 1, iy + 1)
+        # cell (ix, iy) carries functions ix .. ix + 3 along x and iy .. iy + 3 along y
         offsets = element.node_offsets + 1
         connectivity = (ix.ravel()[:, None] + offsets[:, 0]) * ny + (iy.ravel()[:, None] + offsets[:, 1])
-        polynomials = LocalPolynomials.from_lbasis(
-            element.lbasis, 16, self.degree, np.eye(2), np.zeros(2)
-        )
+        if self.knots == "ghost":
+            # every cell alike: the monomial form of the paper's element is fastest
+            local_basis = LocalPolynomials.from_lbasis(element.lbasis, 16, self.degree, np.eye(2), np.zeros(2))
+        else:
+            local_basis = TensorSplines(tuple(open_knot_tables(n) for n in n_elements), n_elements[1])
         x = lower[0] + spacing * np.arange(n_elements[0] + 1)
         y = lower[1] + spacing * np.arange(n_elements[1] + 1)
         return Discretization(
@@ -83,7 +200,7 @@ class BSpline3Basis:
             n_elements=n_elements,
             nodes=np.ascontiguousarray(nodes, dtype=float),
             connectivity=np.ascontiguousarray(connectivity, dtype=np.int32),
-            polynomials=polynomials,
+            local_basis=local_basis,
             mesh=skfem.MeshQuad.init_tensor(x, y),
             element=element,
             nonnegative=self.nonnegative,
@@ -91,3 +208,4 @@ class BSpline3Basis:
 
 
 BSPLINE3 = BSpline3Basis()
+BSPLINE3_OPEN = BSpline3Basis(name="bspline3_open", knots="open")

@@ -56,7 +56,7 @@ class FiniteElementBasis:
         order = _element_order(mesh, lower, width, n_elements)
         connectivity = np.ascontiguousarray(basis.element_dofs[:, order].T, dtype=np.int32)
         nodes = _snap_to_lattice(basis.doflocs.T, lower, spacing)
-        polynomials = LocalPolynomials.from_lbasis(
+        local_basis = LocalPolynomials.from_lbasis(
             element.lbasis, connectivity.shape[1], self.degree, to_reference, offset
         )
         return Discretization(
@@ -67,7 +67,7 @@ class FiniteElementBasis:
             n_elements=n_elements,
             nodes=nodes,
             connectivity=connectivity,
-            polynomials=polynomials,
+            local_basis=local_basis,
             mesh=mesh,
             element=element,
             nonnegative=self.nonnegative,

@@ -7,7 +7,6 @@ from typing import Any
 
 import numpy as np
 
-from .polynomial import LocalPolynomials
 
 
 @dataclass(frozen=True)
@@ -31,8 +30,10 @@ class Discretization:
         Node coordinates (m), exactly ``lower + i * spacing``.
     connectivity : ndarray, shape (n_elements_x * n_elements_y, n_local), int32
         Node indices of the local functions of element ``ix * n_elements_y + iy``.
-    polynomials : LocalPolynomials
-        Local functions in cell coordinates (xi along x, eta along y).
+    local_basis : LocalPolynomials or TensorSplines
+        Local functions in cell coordinates (xi along x, eta along y):
+        ``local_basis.evaluate(cell_points, element) -> (phi, dphi_dxi,
+        dphi_deta)``, each (n, n_local).
     mesh : skfem.MeshQuad
         The elements as a scikit-fem mesh (for plotting and output).
     element : object
@@ -49,7 +50,7 @@ class Discretization:
     n_elements: tuple[int, int]
     nodes: np.ndarray
     connectivity: np.ndarray
-    polynomials: LocalPolynomials
+    local_basis: Any
     mesh: Any
     element: Any
     nonnegative: bool

@@ -103,13 +103,15 @@ class LocalPolynomials:
                         f"in each coordinate (mismatch {error:.2e})"
                     )
 
-    def evaluate(self, cell_points: np.ndarray, out: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def evaluate(self, cell_points: np.ndarray, element: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Values and cell-coordinate derivatives at points in the unit cell.
 
         Parameters
         ----------
         cell_points : ndarray, shape (n, 2)
             ``(xi, eta)`` of each point.
+        element : ndarray, optional
+            Ignored: every element has the same local functions.
 
         Returns
         -------
