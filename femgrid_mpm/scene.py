@@ -53,7 +53,7 @@ class _Model(BaseModel):
 class GridSpec(_Model):
     """``[grid]``: the background grid (see :class:`femgrid_mpm.Grid`)."""
 
-    basis: Literal["q1", "q2", "serendipity", "bspline3"] = "q1"
+    basis: Literal["q1", "q2", "serendipity", "bspline3", "bspline3_open"] = "q1"
     lower: Pair
     upper: Pair
     spacing: PositiveFloat
