@@ -13,6 +13,7 @@ so far kept.  The library raises; only this module exits.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -289,12 +290,18 @@ def _progress_bar(simulation, enabled: bool):
     from tqdm import tqdm
 
     end = simulation.n_steps * simulation.dt
+    try:  # a terminal that reports no size (some ptys) would get no bar at all
+        sized = min(os.get_terminal_size(sys.stderr.fileno())) > 0
+    except (OSError, ValueError):
+        sized = False
     bar = tqdm(
         total=simulation.n_steps,
         unit="step",
         file=sys.stderr,
-        dynamic_ncols=True,
-        bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} steps, {postfix} [{elapsed}<{remaining}]",
+        dynamic_ncols=sized,
+        ncols=None if sized else 100,
+        nrows=None if sized else 24,
+        bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} steps{postfix} [{elapsed}<{remaining}]",
     )
     bar.set_postfix_str(f"t = 0/{end:.4g} s", refresh=False)
 

@@ -103,7 +103,8 @@ class Throttle:
 
     Rewriting the whole file at every record would cost time quadratic in
     the number of records; this bounds it while keeping the file at most
-    about a second behind.  The first call is always due.
+    about a second behind.  The first call is always due; with ``seconds =
+    0`` every call is (no throttling).
     """
 
     seconds: float = 1.0
@@ -112,6 +113,8 @@ class Throttle:
     cost: float = 0.0
 
     def due(self) -> bool:
+        if self.seconds <= 0:
+            return True
         return clock.perf_counter() - self.last >= max(self.seconds, self.cost_ratio * self.cost)
 
     def run(self, write) -> None:

@@ -1,0 +1,515 @@
+"""The command line and its outputs: the contract of README "Command line" and "Outputs".
+
+References: rigid motion is exact (a block moving at 10 m/s is at
+``x0 + 10 t`` to 1e-12 m), the vibrating bar's initial kinetic energy is
+``1/2 rho H int (0.01 cos(pi x / 5))^2 dx = 0.125`` J/m, energies in the
+table equal the ones recomputed from ``final.npz`` to 1e-12, and a killed
+run leaves only complete files.
+"""
+
+import csv
+import fcntl
+import json
+import os
+import pty
+import select
+import signal
+import struct
+import subprocess
+import sys
+import termios
+import time
+import xml.etree.ElementTree as ElementTree
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+from femgrid_mpm import cli
+from femgrid_mpm.energy import COLUMNS
+from femgrid_mpm.output import EnergyCsv, atomic_path, atomic_write, scene_to_toml
+from femgrid_mpm.scene import Scene, bundled_scene, load_scene
+from femgrid_mpm.solver import Simulation
+
+ROOT = Path(__file__).parents[1]
+VIBRATING_BAR = ROOT / "scenes" / "vibrating_bar.toml"
+ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+
+
+def block(**changes) -> Scene:
+    """A 1 x 1 block (2 x 2 points per cell: 16 points) in a 4 x 3 q1 grid (63 nodes)."""
+    data = {
+        "title": "Block",
+        "grid": {"basis": "q1", "lower": [0, 0], "upper": [4, 3], "spacing": 0.5},
+        "time": {"dt": 0.01, "end": 0.2},
+        "bodies": [
+            {
+                "name": "block",
+                "lower": [0.75, 0.5],
+                "upper": [1.75, 1.5],
+                "points_per_cell": 2,
+                "velocity": [1.0, 0.25],
+                "material": {"E": 1e4, "nu": 0.3, "density": 1e3},
+            }
+        ],
+        "output": {"every": 5},
+    }
+    for key, value in changes.items():
+        if value is None:
+            data.pop(key, None)
+        else:
+            data[key] = value
+    return Scene.model_validate(data)
+
+
+def write_scene(directory: Path, scene: Scene, name="scene.toml") -> Path:
+    path = directory / name
+    path.write_text(scene_to_toml(scene))
+    return path
+
+
+def run_cli(argv, capsys):
+    code = cli.main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def read_energy(path: Path) -> tuple[list[str], np.ndarray]:
+    with path.open() as handle:
+        rows = list(csv.reader(handle))
+    return rows[0], np.array(rows[1:], dtype=float).reshape(-1, len(rows[0]))
+
+
+def read_series(directory: Path) -> list[tuple[float, meshio.Mesh]]:
+    root = ElementTree.parse(directory / "particles.pvd").getroot()
+    datasets = root.find("Collection").findall("DataSet")
+    return [(float(d.get("timestep")), meshio.read(directory / d.get("file"))) for d in datasets]
+
+
+def info_lines(stdout: str) -> dict:
+    return {key.strip(): value.strip() for key, _, value in (line.partition(":") for line in stdout.splitlines())}
+
+
+# -- run ------------------------------------------------------------------------------------
+
+
+def test_run_vibrating_bar_with_overrides(tmp_path, capsys):
+    """``femgrid-mpm run scenes/vibrating_bar.toml --out DIR --basis bspline3 --mass consistent``
+    (shortened to 0.3 s: 100 steps) writes the whole contract."""
+    out = tmp_path / "bar"
+    argv = ["run", VIBRATING_BAR, "--out", out, "--basis", "bspline3", "--mass", "consistent", "--set", "time.end=0.3"]
+    code, stdout, err = run_cli(argv, capsys)
+    assert code == 0, err
+    assert err == ""  # stderr is not a terminal here: no progress bar
+    assert stdout.startswith("reached t = 0.3 s: 100 steps") and str(out) in stdout
+    assert sorted(p.name for p in out.iterdir()) == ["energy.csv", "final.npz", "scene.toml", "source_scene.toml", "summary.json"]
+
+    header, energy = read_energy(out / "energy.csv")
+    assert header == [c for c in COLUMNS if c != "external_work"]  # no loads: no work column
+    assert len(energy) == 101
+    np.testing.assert_allclose(energy[:, 0], 0.003 * np.arange(101), rtol=1e-12, atol=1e-15)
+    total = energy[:, header.index("total")]
+    assert total[0] == pytest.approx(0.125, rel=1e-12)
+    np.testing.assert_allclose(total, 0.125, rtol=0.01)  # energy conserved within 1%
+
+    final = np.load(out / "final.npz")
+    assert {"x0", "x", "v", "stress", "strain", "mass", "volume", "body"} <= set(final.files)
+    assert final["x"].shape == final["v"].shape == (180, 2) and final["stress"].shape == final["strain"].shape == (180, 3)
+    assert (int(final["step"]), float(final["time"])) == (100, pytest.approx(0.3, rel=1e-12))
+    np.testing.assert_array_equal(final["body"], 0)
+    assert final["mass"].sum() == pytest.approx(1e3 * 5.0, rel=1e-12)  # density x bar area
+    assert final["volume"].sum() == pytest.approx(5.0, rel=1e-3)  # nearly incompressible motion
+    # the last row is the final state's energy
+    kinetic = 0.5 * np.sum(final["mass"][:, None] * final["v"] ** 2)  # Eq. 26
+    assert energy[-1, header.index("kinetic")] == pytest.approx(kinetic, rel=1e-12)
+    stress, strain = final["stress"], final["strain"]  # Eq. 27, tensor shear counted twice
+    strain = 0.5 * np.sum(final["volume"] * (stress[:, 0] * strain[:, 0] + stress[:, 1] * strain[:, 1] + 2 * stress[:, 2] * strain[:, 2]))
+    assert energy[-1, header.index("strain")] == pytest.approx(strain, rel=1e-12)
+
+    summary = json.loads((out / "summary.json").read_text())
+    expected_scene = load_scene(VIBRATING_BAR, {"grid.basis": "bspline3", "solver.mass": "consistent", "time.end": 0.3})
+    simulation = Simulation(expected_scene)
+    assert (summary["title"], summary["basis"], summary["mass"]) == ("Free vibration of an elastic bar", "bspline3", "consistent")
+    assert (summary["status"], summary["stop"], summary["steps"], summary["records"]) == ("completed", None, 100, 101)
+    assert (summary["points"], summary["nodes"]) == (180, simulation.grid.n_nodes)
+    assert summary["negative_mass"]["steps_with_negative_mass"] == 0 and summary["wall_time"] > 0
+    assert summary["overrides"] == {"time.end": 0.3, "grid.basis": "bspline3", "solver.mass": "consistent"}
+    # the scene as run loads back equal; the source is copied byte for byte
+    assert load_scene(out / "scene.toml") == expected_scene
+    assert (out / "source_scene.toml").read_bytes() == VIBRATING_BAR.read_bytes()
+
+
+def test_rerunning_into_a_directory_replaces_the_earlier_outputs(tmp_path, capsys):
+    """Fewer records the second time: no particle file of the first run is left over."""
+    scene = write_scene(tmp_path, block(output={"every": 2, "particles": True}))
+    out = tmp_path / "out"
+    assert run_cli(["run", scene, "--out", out], capsys)[0] == 0
+    assert len(list((out / "particles").iterdir())) == 11
+    assert run_cli(["run", scene, "--out", out, "--set", "output.every=10", "--set", "output.energy=false"], capsys)[0] == 0
+    assert sorted(p.name for p in (out / "particles").iterdir()) == ["particles_00.vtu", "particles_10.vtu", "particles_20.vtu"]
+    assert len(read_series(out)) == 3
+    assert not (out / "energy.csv").exists()  # energy not declared any more
+
+
+STOPS = {
+    # a block at 10 m/s: its right column of points (x = 1.625) passes x = 4 at step 24
+    "particle_left_grid": (dict(), {"velocity": [10.0, 0.0]}, 24),
+    # serendipity's lumped corner masses are negative from the start
+    "negative_mass": (dict(grid={"basis": "serendipity", "lower": [0, 0], "upper": [4, 3], "spacing": 0.5}), {}, 0),
+    # a weight of 62.5 kg x 1e308 m/s^2 overflows: the state is not finite after the first step
+    "not_finite": (dict(loads=[{"kind": "gravity", "acceleration": [0.0, -1e308]}]), {"velocity": [0.0, 0.0]}, 1),
+}
+
+
+@pytest.mark.parametrize("reason", list(STOPS))
+def test_stopped_run_exits_3_and_keeps_valid_outputs(tmp_path, capsys, reason):
+    changes, body_changes, stop_step = STOPS[reason]
+    base = block()
+    body = {**base.bodies[0].model_dump(mode="json"), **body_changes}
+    scene = block(bodies=[body], time={"dt": 0.01, "end": 0.5}, output={"every": 5, "particles": True}, **changes)
+    out = tmp_path / "out"
+    code, stdout, err = run_cli(["run", write_scene(tmp_path, scene), "--out", out], capsys)
+    assert code == cli.EXIT_STOPPED
+    assert "Traceback" not in err and stdout == ""
+    assert err.splitlines()[-1].startswith(f"femgrid-mpm: stopped: step {stop_step} ")
+    assert err.splitlines()[-1].endswith(f"the outputs so far are in {out}")
+
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "stopped"
+    assert (summary["stop"]["reason"], summary["stop"]["step"]) == (reason, stop_step)
+    assert summary["stop"]["time"] == pytest.approx(0.01 * stop_step, rel=1e-12)
+    records = [k * 0.05 for k in range((stop_step + 4) // 5)]  # record steps 0, 5, ... before the stop
+    header, energy = read_energy(out / "energy.csv")
+    assert header[0] == "time" and summary["records"] == len(records)
+    np.testing.assert_allclose(energy[:, 0], records, rtol=1e-12)
+    final = np.load(out / "final.npz")
+    assert int(final["step"]) == stop_step
+    if records:
+        series = read_series(out)
+        assert [t for t, _ in series] == pytest.approx(records, rel=1e-12)
+    else:
+        assert not (out / "particles.pvd").exists()  # nothing was recorded
+    if reason == "particle_left_grid":
+        # rigid motion is exact: positions x0 + v t, in the table, the series and final.npz
+        for t, mesh in series:
+            np.testing.assert_allclose(mesh.points[:, :2], final["x0"] + [10.0 * t, 0.0], rtol=0, atol=1e-12)
+            np.testing.assert_allclose(mesh.point_data["velocity"], np.tile([10.0, 0.0, 0.0], (16, 1)), rtol=0, atol=1e-12)
+            np.testing.assert_array_equal(mesh.point_data["body"], 0)
+        np.testing.assert_allclose(final["x"], final["x0"] + [10.0 * 0.24, 0.0], rtol=0, atol=1e-12)
+        assert final["x"][:, 0].max() > 4.0  # the state the run stopped at
+    if reason == "negative_mass":
+        negative = summary["negative_mass"]
+        assert (negative["steps_with_negative_mass"], negative["first_step"]) == (1, 0)
+        assert negative["min_mass_ratio"] < 0
+        np.testing.assert_array_equal(final["x"], final["x0"])
+
+
+# -- effects: only the declared ones run ------------------------------------------------------
+
+
+def all_effects_scene(**output) -> Scene:
+    return block(
+        loads=[
+            {"kind": "gravity", "acceleration": [0.0, -9.81]},
+            {"kind": "point", "body": "block", "at": [1.75, 1.5], "force": [1.0, 0.0], "ramp": 0.1},
+        ],
+        damping={"kind": "mass", "coefficient": 0.5},
+        supports=[{"where": "y <= 0", "fix": ["y"]}],
+        contact={"kind": "shared"},
+        output={"every": 5, **output},
+    )
+
+
+def test_info_lists_counts_effects_and_time_steps(tmp_path, capsys):
+    scene = all_effects_scene(particles=True)
+    code, stdout, err = run_cli(["info", write_scene(tmp_path, scene)], capsys)
+    assert code == 0 and err == ""
+    lines = info_lines(stdout)
+    assert (lines["title"], lines["basis"], lines["mass"]) == ("Block", "q1", "lumped")
+    assert lines["points"] == "16 (block 16)"  # 2 x 2 cells of 2 x 2 points
+    assert lines["nodes"] == str(9 * 7)  # q1 on [0, 4] x [0, 3] at spacing 0.5
+    effects = lines["effects"].split(", ")
+    assert effects[0] == "internal_force (always)"
+    assert sorted(effects[1:]) == ["damping", "energy", "gravity", "particles", "point_load", "supports"]
+    assert lines["dt"] == "0.01 s"
+    assert lines["critical_dt"] == f"{Simulation(scene).critical_dt:.6g} s (estimated)"
+    assert lines["steps"] == "20 to t = 0.2 s"
+
+
+def test_info_with_overrides_and_an_unstable_time_step(tmp_path, capsys):
+    """dt beyond the critical step: a one-line warning on stderr, exit 0."""
+    path = write_scene(tmp_path, block())
+    critical = Simulation(block()).critical_dt
+    code, stdout, err = run_cli(["info", path, "--set", f"time.dt={3 * critical!r}", "--basis", "q2"], capsys)
+    assert code == 0
+    assert info_lines(stdout)["basis"] == "q2"
+    (warning,) = err.splitlines()
+    assert warning.startswith("femgrid-mpm: warning: dt = ") and "exceeds the estimated critical time step" in warning
+    # q2's critical step is smaller than q1's
+    assert float(info_lines(stdout)["critical_dt"].split()[0]) < critical
+
+
+def test_undeclared_effects_run_no_code(tmp_path, capsys, monkeypatch):
+    """No [output], loads, damping or supports: ``info`` lists only the internal
+    force, and a run succeeds although every effect's set-up is booby-trapped."""
+    from femgrid_mpm import effects, energy, output
+
+    def trap(self, simulation):
+        raise AssertionError(f"{type(self).__name__} was bound although not declared")
+
+    for cls in (effects.Gravity, effects.PointLoad, effects.MassDamping, effects.Support, energy.EnergyBookkeeping, output.ParticleSeries):
+        monkeypatch.setattr(cls, "bind", trap)
+    path = write_scene(tmp_path, block(output=None))
+    code, stdout, _ = run_cli(["info", path], capsys)
+    assert code == 0 and info_lines(stdout)["effects"] == "internal_force (always)"
+    out = tmp_path / "out"
+    code, _, err = run_cli(["run", path, "--out", out], capsys)
+    assert code == 0, err
+    assert sorted(p.name for p in out.iterdir()) == ["final.npz", "scene.toml", "source_scene.toml", "summary.json"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["effects"] == [] and summary["records"] == 0
+    final = np.load(out / "final.npz")
+    np.testing.assert_allclose(final["x"] - final["x0"], np.tile([0.2, 0.05], (16, 1)), rtol=0, atol=1e-12)  # v t, rigid
+
+
+@pytest.mark.parametrize("particles", [False, True])
+def test_particle_output_only_when_declared(tmp_path, capsys, particles):
+    path = write_scene(tmp_path, block(output={"every": 5, "particles": particles}))
+    effects = info_lines(run_cli(["info", path], capsys)[1])["effects"]
+    assert ("particles" in effects.split(", ")) is particles
+    out = tmp_path / "out"
+    assert run_cli(["run", path, "--out", out], capsys)[0] == 0
+    assert (out / "particles.pvd").exists() is particles
+    assert (out / "particles").exists() is particles
+    if particles:
+        series = read_series(out)
+        assert [t for t, _ in series] == pytest.approx([0.0, 0.05, 0.1, 0.15, 0.2], rel=1e-12)
+        final = np.load(out / "final.npz")
+        np.testing.assert_array_equal(series[-1][1].points[:, :2], final["x"])  # the last record is the final state
+
+
+def test_declared_effects_of_zero_strength_change_no_result(tmp_path, capsys):
+    """Gravity 0, a point force 0 and damping 0, declared: bit-identical final
+    state and energies; the work column they add is zero throughout."""
+    plain, zero = tmp_path / "plain", tmp_path / "zero"
+    assert run_cli(["run", write_scene(tmp_path, block(), "plain.toml"), "--out", plain], capsys)[0] == 0
+    zero_scene = block(
+        loads=[
+            {"kind": "gravity", "acceleration": [0.0, 0.0]},
+            {"kind": "point", "body": "block", "at": [1.0, 1.0], "force": [0.0, 0.0]},
+        ],
+        damping={"kind": "mass", "coefficient": 0.0},
+    )
+    code, stdout, _ = run_cli(["info", write_scene(tmp_path, zero_scene, "zero.toml")], capsys)
+    assert {"gravity", "point_load", "damping"} <= set(info_lines(stdout)["effects"].split(", "))
+    assert run_cli(["run", tmp_path / "zero.toml", "--out", zero], capsys)[0] == 0
+    for name in ("x", "v", "stress", "strain", "volume"):
+        np.testing.assert_array_equal(np.load(zero / "final.npz")[name], np.load(plain / "final.npz")[name])
+    plain_header, plain_energy = read_energy(plain / "energy.csv")
+    zero_header, zero_energy = read_energy(zero / "energy.csv")
+    assert zero_header == [*plain_header, "external_work"]
+    np.testing.assert_array_equal(zero_energy[:, :-1], plain_energy)
+    np.testing.assert_array_equal(zero_energy[:, -1], 0.0)
+
+
+# -- progress bar -----------------------------------------------------------------------------
+
+
+def test_progress_bar_is_quiet_when_stderr_is_not_a_terminal(tmp_path):
+    path = write_scene(tmp_path, block())
+    process = subprocess.run(
+        [sys.executable, "-m", "femgrid_mpm.cli", "run", str(path), "--out", str(tmp_path / "out")],
+        capture_output=True, text=True, env=ENV, timeout=120,
+    )
+    assert process.returncode == 0
+    assert process.stderr == ""
+    assert process.stdout.startswith("reached t = 0.2 s: 20 steps")
+
+
+def test_progress_bar_on_a_terminal_shows_steps_and_simulated_time(tmp_path):
+    path = write_scene(tmp_path, block())
+    leader, follower = pty.openpty()
+    fcntl.ioctl(follower, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a terminal 100 columns wide
+    process = subprocess.Popen(
+        [sys.executable, "-m", "femgrid_mpm.cli", "run", str(path), "--out", str(tmp_path / "out")],
+        stdout=subprocess.DEVNULL, stderr=follower, env=ENV,
+    )
+    os.close(follower)
+    shown = b""
+    while True:  # read as it comes, so the terminal's buffer never fills
+        ready, _, _ = select.select([leader], [], [], 120)
+        try:
+            chunk = os.read(leader, 4096) if ready else b""
+        except OSError:  # the terminal closed with the process
+            chunk = b""
+        if not chunk:
+            break
+        shown += chunk
+    os.close(leader)
+    assert process.wait(timeout=120) == 0
+    text = shown.decode(errors="replace")
+    assert "20/20 steps" in text and "t = 0.2/0.2 s" in text and "100%" in text
+
+
+# -- killed and interrupted runs ----------------------------------------------------------------
+
+
+def start_long_run(tmp_path) -> tuple[subprocess.Popen, Path]:
+    """The vibrating bar run for 100 s (tens of seconds of work), with particle output."""
+    out = tmp_path / "out"
+    argv = [sys.executable, "-m", "femgrid_mpm.cli", "run", str(VIBRATING_BAR), "--out", str(out),
+            "--set", "time.end=100", "--set", "output.every=10", "--set", "output.particles=true"]
+    return subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=ENV), out
+
+
+def wait_for_records(process, out: Path, rows: int, timeout=120.0) -> None:
+    """Until energy.csv holds ``rows`` records (it is rewritten about once a second)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert process.poll() is None, "the run ended before it could be interrupted"
+        energy = out / "energy.csv"
+        if energy.exists() and len(energy.read_text().splitlines()) > rows:
+            return
+        time.sleep(0.05)
+    raise AssertionError("no records in time")
+
+
+def assert_outputs_complete(out: Path) -> dict:
+    """Every output file under its final name parses completely."""
+    header, energy = read_energy(out / "energy.csv")  # a torn row would not have all columns
+    assert header == [c for c in COLUMNS if c != "external_work"]
+    steps = energy[:, 0] / 0.03
+    np.testing.assert_allclose(steps, np.arange(len(energy)), atol=1e-6)  # every record, in order
+    for t, mesh in read_series(out):
+        assert len(mesh.points) == 180 and mesh.point_data["velocity"].shape == (180, 3)
+    summary = json.loads((out / "summary.json").read_text())
+    names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
+    assert names <= {"energy.csv", "final.npz", "summary.json", "scene.toml", "source_scene.toml", "particles.pvd", "particles"}
+    return summary
+
+
+def test_killed_run_leaves_only_complete_files(tmp_path):
+    process, out = start_long_run(tmp_path)
+    try:
+        wait_for_records(process, out, rows=2)
+    finally:
+        process.kill()
+        process.wait(timeout=60)
+    summary = assert_outputs_complete(out)
+    assert summary["status"] == "running"  # it never got to say otherwise
+    assert not (out / "final.npz").exists()
+
+
+def test_interrupted_run_exits_130_and_writes_what_it_has(tmp_path):
+    process, out = start_long_run(tmp_path)
+    try:
+        wait_for_records(process, out, rows=2)
+        process.send_signal(signal.SIGINT)
+        assert process.wait(timeout=60) == cli.EXIT_INTERRUPTED
+    finally:
+        process.kill()
+    assert process.stderr.read().decode().splitlines()[-1].startswith("femgrid-mpm: interrupted: at step ")
+    summary = assert_outputs_complete(out)
+    assert summary["status"] == "interrupted"
+    final = np.load(out / "final.npz")
+    assert int(final["step"]) == summary["steps"] > 0
+    _, energy = read_energy(out / "energy.csv")
+    assert energy[-1, 0] <= float(final["time"]) < energy[-1, 0] + 0.03 + 1e-9  # every record so far is in the table
+
+
+# -- atomic files ------------------------------------------------------------------------------
+
+
+def test_atomic_write_keeps_the_old_file_when_writing_fails(tmp_path):
+    path = tmp_path / "table.csv"
+    atomic_write(path, "old, complete\n")
+    with pytest.raises(RuntimeError):
+        with atomic_path(path) as temporary:
+            temporary.write_text("new, half")
+            raise RuntimeError("killed while writing")
+    assert path.read_text() == "old, complete\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["table.csv"]  # no temporary left
+
+
+@pytest.mark.parametrize("flush_seconds", [0.0, 1e9])
+def test_energy_csv_rows_reach_the_file(tmp_path, flush_seconds):
+    """Every row at once without throttling; with it, the first row at once and
+    the rest by ``flush``; never a partial table."""
+    path = tmp_path / "energy.csv"
+    table = EnergyCsv(path, ("time", "kinetic"), flush_seconds)
+    table.flush()
+    assert path.read_text() == "time,kinetic\n"
+    for k in range(5):
+        table.add_row({"time": 0.1 * k, "kinetic": 1.0 / 3.0, "strain": 7.0})
+        rows_on_disk = len(path.read_text().splitlines()) - 1
+        assert rows_on_disk == (k + 1 if flush_seconds == 0 else 1)
+    table.flush()
+    header, values = read_energy(path)
+    assert header == ["time", "kinetic"]
+    np.testing.assert_array_equal(values[:, 0], [0.1 * k for k in range(5)])
+    np.testing.assert_array_equal(values[:, 1], 1.0 / 3.0)  # repr: the same double back
+
+
+# -- usage errors, help, reproduce -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        ([], "required"),
+        (["frobnicate"], "invalid choice"),
+        (["run"], "required"),
+        (["run", "{scene}"], "--out"),
+        (["run", "{scene}", "--out", "{tmp}/o", "--basis", "q7"], "argument --basis: invalid choice: 'q7'"),
+        (["run", "{scene}", "--out", "{tmp}/o", "--mass", "diagonal"], "argument --mass: invalid choice"),
+        (["run", "{scene}", "--out", "{tmp}/o", "--set", "time.end"], "--set time.end: expected KEY=VALUE"),
+        (["run", "{scene}", "--out", "{tmp}/o", "--set", "bodies.3.name=x"], "bodies.3.name: no such key to set"),
+        (["run", "{scene}", "--out", "{tmp}/o", "--set", "time.end=-1"], "time.end: must be greater than 0"),
+        (["run", "{scene}", "--out", "{scene}"], "exists and is not a directory"),
+        (["run", "{scene}", "--out", "{scene}/sub"], "cannot write there"),
+        (["info", "{tmp}/missing.toml"], "no such scene file"),
+        (["reproduce", "--case", "nope"], "--case nope: no such case"),
+    ],
+)
+def test_bad_arguments_are_one_line_exit_2(tmp_path, capsys, argv, words):
+    scene = write_scene(tmp_path, block())
+    argv = [a.format(scene=scene, tmp=tmp_path) for a in argv]
+    code, stdout, err = run_cli(argv, capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    assert "Traceback" not in err
+    (line,) = err.splitlines()
+    assert line.startswith("femgrid-mpm: error: ") and words in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_help_lists_commands_and_exit_codes(capsys):
+    code, stdout, _ = run_cli(["--help"], capsys)
+    assert code == 0
+    stdout = " ".join(stdout.split())  # argparse wraps the text
+    assert all(word in stdout for word in ("run", "info", "reproduce", "Exit codes", "3 the simulation stopped"))
+
+
+def test_reproduce_runs_every_case_and_prints_its_table(tmp_path, capsys, monkeypatch):
+    """The loop over ``femgrid_mpm.reproduce.CASES`` (replaced here by two quick cases)."""
+    from femgrid_mpm import reproduce
+
+    calls = []
+
+    def case(name):
+        def run(out_dir):
+            calls.append(Path(out_dir))
+            Path(out_dir).mkdir(parents=True)
+            (Path(out_dir) / "table.md").write_text(f"| {name} |\n")
+
+        return run
+
+    monkeypatch.setattr(reproduce, "CASES", {"first": case("first"), "second": case("second")})
+    code, stdout, err = run_cli(["reproduce", "--out", tmp_path / "results"], capsys)
+    assert code == 0
+    assert calls == [tmp_path / "results" / "first", tmp_path / "results" / "second"]
+    assert stdout == "| first |\n\n| second |\n\n"
+    assert err == "first ...\nsecond ...\n"
+    calls.clear()
+    assert run_cli(["reproduce", "--out", tmp_path / "again", "--case", "second"], capsys)[0] == 0
+    assert calls == [tmp_path / "again" / "second"]
