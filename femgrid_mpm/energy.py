@@ -4,7 +4,8 @@ At every record step, with the grid velocities of time t known:
 
 * ``kinetic``       E_kin = 1/2 sum_p m_p v_p.v_p                     (Eq. 26)
 * ``kinetic_grid``  E_kin^nodes = 1/2 v.M v, lumped or consistent  (Eqs. 28-29)
-* ``strain``        E_pot = 1/2 sum_p V_p sigma_p : eps_p              (Eq. 27)
+* ``strain``        E_pot = 1/2 sum_p V_p sigma_p : eps_p (Eq. 27), or the
+                    stored energy of a hyperelastic material
 * ``total``         E_kin + E_pot                                      (Eq. 25)
 * ``external_work`` W, the work done by the declared forces so far
 * ``total_error``   dE_kin + dE_pot - W                             (Eqs. 30-31)
@@ -42,12 +43,6 @@ def kinetic_energy(mass: np.ndarray, velocity: np.ndarray) -> float:
     return 0.5 * float(np.einsum("p,pi,pi->", mass, velocity, velocity))
 
 
-def strain_energy(volume: np.ndarray, stress: np.ndarray, strain: np.ndarray) -> float:
-    """Eq. 27 with tensor shear: ``1/2 sum V (s_xx e_xx + s_yy e_yy + 2 s_xy e_xy)``."""
-    weights = np.array([1.0, 1.0, 2.0])
-    return 0.5 * float(np.einsum("p,pk,pk,k->", volume, stress, strain, weights))
-
-
 @dataclass
 class EnergyBookkeeping:
     """Records one row of :data:`COLUMNS` per record step."""
@@ -65,7 +60,7 @@ class EnergyBookkeeping:
             particles = ctx.particles
             kinetic = kinetic_energy(particles.mass, particles.v)
             grid = 0.5 * float(np.sum(ctx.velocity * ctx.mass.apply(ctx.velocity)))
-            strain = strain_energy(particles.volume, particles.stress, particles.strain)
+            strain = ctx.simulation.strain_energy()
             work = float(sum(ctx.work.values()))
             if not initial:
                 initial.update(kinetic=kinetic, grid=grid, strain=strain, work=work)

@@ -1,4 +1,19 @@
-"""Constitutive laws: linear elasticity in the paper's incremental form (Eq. 6)."""
+"""Constitutive laws, one class each, selected by ``material.model`` in a scene.
+
+A material updates the stress of its own points once per step from the
+step's displacement-gradient increment ``dt * L`` (and the strain increment,
+its symmetric part), and knows its stored energy for the energy ledger.
+
+* :class:`LinearElastic` (``"linear_elastic"``): the paper's hypo-elastic
+  increment, ``d(sigma) = D : d(epsilon)`` (Eq. 6).  Not objective: under
+  large rotation the stress does not rotate with the material.
+* :class:`NeoHookean` (``"neo_hookean"``): compressible neo-Hookean on the
+  deformation gradient, ``F <- (I + dt L) F``; objective, hyperelastic
+  (exact stored energy), the finite-strain option for large rotations.
+
+Stress and strain are stored as (xx, yy, xy) with tensor shear; the
+deformation gradient as (F_xx, F_xy, F_yx, F_yy).
+"""
 
 from __future__ import annotations
 
@@ -21,8 +36,6 @@ class LinearElastic:
         Initial mass density (kg/m^3).
     plane : {"strain", "stress"}
         2D idealisation.
-
-    Stress and strain are stored as (xx, yy, xy) with tensor shear.
     """
 
     E: float
@@ -66,3 +79,62 @@ class LinearElastic:
         out[:, 1] += lam * volumetric + 2.0 * mu * strain_increment[:, 1]
         out[:, 2] += 2.0 * mu * strain_increment[:, 2]
         return out
+
+    def update(self, particles, members: slice, strain_increment: np.ndarray, gradient_increment: np.ndarray) -> None:
+        """One step for the points ``members``: Eq. 6."""
+        self.stress_increment(strain_increment[members], out=particles.stress[members])
+
+    def strain_energy(self, particles, members: slice) -> float:
+        """Paper Eq. 27, ``1/2 sum V sigma : epsilon`` (J per unit thickness)."""
+        weights = np.array([1.0, 1.0, 2.0])  # tensor shear counts twice
+        volume = particles.mass[members] / particles.density[members]
+        return 0.5 * float(np.einsum("p,pk,pk,k->", volume, particles.stress[members], particles.strain[members], weights))
+
+
+@dataclass(frozen=True)
+class NeoHookean(LinearElastic):
+    """Compressible neo-Hookean solid in plane strain (``F_zz = 1``).
+
+    ``sigma = mu / J (b - I) + lambda ln(J) / J I`` with ``b = F F^T`` and
+    ``J = det F``; stored energy per reference volume
+    ``W = mu / 2 (tr b + 1 - 3) - mu ln J + lambda / 2 (ln J)^2``.  ``E``
+    and ``nu`` give the small-strain ``mu`` and ``lambda``, so small
+    deformations agree with :class:`LinearElastic`.
+    """
+
+    def update(self, particles, members: slice, strain_increment: np.ndarray, gradient_increment: np.ndarray) -> None:
+        F = particles.deformation_gradient[members].reshape(-1, 2, 2)
+        increment = gradient_increment[members].reshape(-1, 2, 2) + np.eye(2)
+        F = np.matmul(increment, F)
+        particles.deformation_gradient[members] = F.reshape(-1, 4)
+        particles.stress[members] = self.cauchy_stress(F)
+
+    def cauchy_stress(self, F: np.ndarray) -> np.ndarray:
+        """Cauchy stress (xx, yy, xy), shape (n, 3), from ``F`` of shape (n, 2, 2)."""
+        lam, mu = self.lame_lambda, self.shear_modulus
+        J = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
+        b = np.matmul(F, np.swapaxes(F, 1, 2))
+        pressure_like = (lam * np.log(J) - mu) / J
+        return np.column_stack([
+            mu / J * b[:, 0, 0] + pressure_like,
+            mu / J * b[:, 1, 1] + pressure_like,
+            mu / J * b[:, 0, 1],
+        ])
+
+    def strain_energy(self, particles, members: slice) -> float:
+        """``sum V_0 W(F)`` (J per unit thickness), ``V_0 = m / rho_0``."""
+        lam, mu = self.lame_lambda, self.shear_modulus
+        F = particles.deformation_gradient[members]
+        J = F[:, 0] * F[:, 3] - F[:, 1] * F[:, 2]
+        trace_b = np.einsum("pk,pk->p", F, F)  # F_xx^2 + F_xy^2 + F_yx^2 + F_yy^2
+        log_J = np.log(J)
+        density = 0.5 * mu * (trace_b - 2.0) - mu * log_J + 0.5 * lam * log_J**2
+        return float(np.sum(particles.mass[members] / self.density * density))
+
+
+MODELS = {"linear_elastic": LinearElastic, "neo_hookean": NeoHookean}
+
+
+def make_material(spec) -> LinearElastic:
+    """The material of a scene's ``material`` table."""
+    return MODELS[spec.model](spec.E, spec.nu, spec.density, spec.plane)

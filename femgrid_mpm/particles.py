@@ -29,6 +29,9 @@ class Particles:
         Index of the body in scene order.
     x0 : ndarray, shape (n, 2)
         Initial positions (m).
+    deformation_gradient : ndarray, shape (n, 4)
+        F_xx, F_xy, F_yx, F_yy; kept up to date only for materials that use
+        it (neo-Hookean), identity otherwise.
     """
 
     x: np.ndarray
@@ -39,6 +42,11 @@ class Particles:
     strain: np.ndarray
     body: np.ndarray
     x0: np.ndarray = field(repr=False)
+    deformation_gradient: np.ndarray = field(default=None, repr=False)
+
+    def __post_init__(self):
+        if self.deformation_gradient is None:
+            self.deformation_gradient = np.tile([1.0, 0.0, 0.0, 1.0], (len(self.mass), 1))
 
     @property
     def n(self) -> int:

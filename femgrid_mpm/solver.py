@@ -29,7 +29,7 @@ from .energy import EnergyBookkeeping
 from .expressions import compile_expression
 from .grid import Grid
 from .mass import ConsistentMass, LumpedMass, SingularMassError
-from .materials import LinearElastic
+from .materials import make_material
 from .particles import Particles, seed_rectangle
 from .scene import Scene
 from .stability import critical_time_step
@@ -74,7 +74,7 @@ class Simulation:
         self.scene = scene
         spec = scene.grid
         self.grid = Grid(spec.basis, spec.lower, spec.upper, spec.spacing)
-        self.materials = [LinearElastic(b.material.E, b.material.nu, b.material.density, b.material.plane) for b in scene.bodies]
+        self.materials = [make_material(body.material) for body in scene.bodies]
         self.particles = self._seed()
         self.body_slices = self.particles.body_slices()
         self.reference_mass = max(m.density for m in self.materials) * spec.spacing**2
@@ -152,6 +152,10 @@ class Simulation:
             )
         return time.safety * self.critical_dt
 
+    def strain_energy(self) -> float:
+        """Stored energy of all bodies (J per unit thickness), each by its own law."""
+        return sum(material.strain_energy(self.particles, members) for material, members in zip(self.materials, self.body_slices))
+
     def body_index(self, name: str) -> int:
         return [body.name for body in self.scene.bodies].index(name)
 
@@ -192,9 +196,10 @@ class Simulation:
         dv_dx = ctx.dNdx @ relative_velocity  # (n, 2): d(vx)/dx, d(vy)/dx
         dv_dy = ctx.dNdy @ relative_velocity  # (n, 2): d(vx)/dy, d(vy)/dy
         strain_increment = dt * np.column_stack([dv_dx[:, 0], dv_dy[:, 1], 0.5 * (dv_dy[:, 0] + dv_dx[:, 1])])
+        gradient_increment = dt * np.column_stack([dv_dx[:, 0], dv_dy[:, 0], dv_dx[:, 1], dv_dy[:, 1]])  # dt L
         p.strain += strain_increment
         for material, members in zip(self.materials, self.body_slices):
-            material.stress_increment(strain_increment[members], out=p.stress[members])
+            material.update(p, members, strain_increment, gradient_increment)
         # 7: internal force (Eq. 11) with the volumes of time t, then declared forces
         weighted_stress = p.volume[:, None] * p.stress
         ctx.force = -(ctx.dNdx.T @ weighted_stress[:, [0, 2]] + ctx.dNdy.T @ weighted_stress[:, [2, 1]])
