@@ -100,13 +100,20 @@ class SolverSpec(_Model):
 
 
 class Material(_Model):
-    """``material = {...}``: linear elasticity in the paper's incremental form."""
+    """``material = {...}``: ``"linear_elastic"`` (the paper's incremental law) or
+    ``"neo_hookean"`` (finite strain, plane strain only); see :mod:`femgrid_mpm.materials`."""
 
-    model: Literal["linear_elastic"] = "linear_elastic"
+    model: Literal["linear_elastic", "neo_hookean"] = "linear_elastic"
     E: PositiveFloat
     nu: Annotated[float, Field(gt=-1, lt=0.5)]
     density: PositiveFloat
     plane: Literal["strain", "stress"] = "strain"
+
+    @model_validator(mode="after")
+    def _plane(self):
+        if self.model == "neo_hookean" and self.plane != "strain":
+            raise ValueError("model 'neo_hookean' is implemented in plane strain only; set plane = \"strain\"")
+        return self
 
 
 class Body(_Model):
