@@ -262,8 +262,9 @@ def write_final_state(path: Path, particles, step: int, time: float) -> None:
     Arrays (n points): ``x0``, ``x`` (n, 2) m; ``v`` (n, 2) m/s; ``stress``
     (n, 3) Pa and ``strain`` (n, 3), columns xx, yy, xy (tensor shear);
     ``mass`` (n,) kg per unit thickness; ``volume`` (n,) m^2 per unit
-    thickness; ``body`` (n,) int, the body's index in scene order; and the
-    scalars ``step`` and ``time`` (s) of the state.
+    thickness; ``body`` (n,) int, the body's index in scene order; the
+    scalars ``step`` and ``time`` (s) of the state; and, when the particles
+    carry it, ``deformation_gradient`` (n, 4): F_xx, F_xy, F_yx, F_yy.
     """
     arrays = {
         "x0": particles.x0,
@@ -277,6 +278,9 @@ def write_final_state(path: Path, particles, step: int, time: float) -> None:
         "step": np.int64(step),
         "time": np.float64(time),
     }
+    gradient = getattr(particles, "deformation_gradient", None)
+    if gradient is not None:
+        arrays["deformation_gradient"] = gradient
     with atomic_path(path) as temporary, temporary.open("wb") as handle:
         np.savez(handle, **arrays)
 

@@ -12,6 +12,7 @@ import fcntl
 import json
 import os
 import pty
+import re
 import select
 import signal
 import struct
@@ -513,3 +514,66 @@ def test_reproduce_runs_every_case_and_prints_its_table(tmp_path, capsys, monkey
     calls.clear()
     assert run_cli(["reproduce", "--out", tmp_path / "again", "--case", "second"], capsys)[0] == 0
     assert calls == [tmp_path / "again" / "second"]
+
+
+# -- the README documents the contract ------------------------------------------------------------
+
+README = ROOT / "README.md"
+
+
+def readme_section(title: str) -> str:
+    text = README.read_text()
+    start = text.index(f"\n## {title}\n")
+    end = text.find("\n## ", start + 1)
+    return text[start:end]
+
+
+def scene_keys(node=Scene, seen=None) -> set[str]:
+    """Every key a scene file can hold: the fields of Scene and of every model or effect under it."""
+    import typing
+
+    seen = set() if seen is None else seen
+    origin = typing.get_origin(node)
+    if origin is not None:  # tuple[...], Union[...], Annotated[...]
+        arguments = typing.get_args(node)[:1] if origin is typing.Annotated else typing.get_args(node)
+        return set().union(*(scene_keys(argument, seen) for argument in arguments))
+    fields = getattr(node, "model_fields", None) or getattr(node, "__pydantic_fields__", None)
+    if not isinstance(fields, dict) or node in seen:
+        return set()
+    seen.add(node)
+    keys = set(fields)
+    for info in fields.values():
+        keys |= scene_keys(info.annotation, seen)
+    return keys
+
+
+def test_readme_documents_every_scene_key_option_output_and_exit_code():
+    scene_section = readme_section("Scene files")
+    spellings = ("`{}`", ".{}`", "`[{}]`", "`[[{}]]`")  # a key, material.key, a table, an array of tables
+    undocumented = [key for key in sorted(scene_keys()) if not any(s.format(key) in scene_section for s in spellings)]
+    assert undocumented == [], "scene keys missing from README 'Scene files'"
+    command_section = readme_section("Command line")
+    parser = cli._parser()
+    (commands,) = [action for action in parser._actions if isinstance(action, type(parser._subparsers._group_actions[0]))]
+    for name, subparser in commands.choices.items():
+        assert f"femgrid-mpm {name}" in command_section
+        for action in subparser._actions:
+            for option in action.option_strings:
+                if option not in ("-h", "--help"):
+                    assert f"`{option}" in command_section, (name, option)
+    for code in cli.EXIT_CODES:
+        assert f"\n| {code} |" in command_section, code
+    outputs_section = readme_section("Outputs")
+    for name in [*COLUMNS, "energy.csv", "final.npz", "summary.json", "particles.pvd", "scene.toml", "source_scene.toml",
+                 "x0", "x", "v", "stress", "strain", "mass", "volume", "body", "velocity", "displacement", "stress_xx"]:
+        assert f"`{name}`" in outputs_section, name
+
+
+def test_readme_scene_example_is_a_valid_scene_with_every_effect(tmp_path, capsys):
+    (example,) = re.findall(r"```toml\n(.*?)```", readme_section("Scene files"), flags=re.S)
+    path = tmp_path / "example.toml"
+    path.write_text(example)
+    code, stdout, err = run_cli(["info", path], capsys)
+    assert code == 0 and err == ""
+    effects = info_lines(stdout)["effects"].split(", ")
+    assert sorted(effects) == sorted(["internal_force (always)", "energy", "particles", "gravity", "point_load", "damping", "supports"])
