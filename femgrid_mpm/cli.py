@@ -96,6 +96,9 @@ def main(argv: list[str] | None = None) -> int:
         except BadInput as error:
             _say("error", str(error))
             return EXIT_BAD_INPUT
+        except KeyboardInterrupt:  # outside a run (a run writes its outputs first)
+            _say("interrupted", "stopped by the user")
+            return EXIT_INTERRUPTED
 
 
 def _say(kind: str, message: str) -> None:
