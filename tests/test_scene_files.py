@@ -8,6 +8,7 @@ captured), as a user meets it.
 
 import tomllib
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -307,3 +308,15 @@ def test_bundled_scene_is_the_paper_setup():
     assert scene.grid.upper == (7.0, 1.0) and scene.grid.spacing == 0.5
     assert scene.bodies[0].upper == (5.0, 1.0) and scene.bodies[0].points_per_cell == 3
     assert (scene.time.dt, scene.time.end) == (0.003, 8.0)
+
+
+BUNDLED = sorted((Path(__file__).parents[1] / "femgrid_mpm" / "scenes").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", BUNDLED, ids=[p.stem for p in BUNDLED])
+def test_bundled_scenes_pass_info_with_a_stable_time_step(path, capsys):
+    """Every shipped scene loads under the strict loader, builds, and has dt
+    within the estimated critical step (no warning on stderr)."""
+    code, stdout, err = run_cli(["info", path], capsys)
+    assert code == 0 and err == ""
+    assert load_scene(path).title in stdout
