@@ -195,7 +195,7 @@ def _warn_time_step(simulation) -> None:
     if critical <= 0:
         warnings.warn(
             f"{simulation.scene.grid.basis} with {simulation.scene.solver.mass} mass has no stable time step "
-            "(negative lumped masses): expect the run to grow unboundedly",
+            "(negative lumped masses, or a singular consistent mass): expect the run to grow unboundedly",
             RuntimeWarning,
         )
     elif dt > critical:

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -78,6 +79,15 @@ class LumpedMass:
         self.lumped = N.T @ m_p
         self.active = _active(N, m_p, self.lumped, self.reference_mass)
         self._inverse = np.divide(1.0, self.lumped, out=np.zeros(self.n_nodes), where=self.active)
+
+    def assemble_sums(self, lumped: np.ndarray, absolute: np.ndarray | None, volume: np.ndarray | None = None) -> None:
+        """The same from sums the compiled P2G made: ``N.T @ m_p`` and (signed
+        bases) ``|N|.T @ m_p``.  The arrays are kept, not copied."""
+        if getattr(self, "_inverse", None) is None or len(self._inverse) != len(lumped):
+            self._inverse = np.zeros(len(lumped))
+            self.active = np.zeros(len(lumped), dtype=bool)
+        self.lumped = lumped
+        _lumped_inverse(lumped, lumped if absolute is None else absolute, self.reference_mass, self._inverse, self.active)
 
     def solve(self, rhs: np.ndarray, kind: str = "velocity") -> np.ndarray:
         """``rhs / m_i`` on active nodes, zero elsewhere; rhs shape (n_nodes, 2)."""
@@ -121,6 +131,10 @@ class ConsistentMass:
     linear_solver: str = "auto"
     fallback: str = "error"
     blend: float = 0.1
+    #: (n_nodes, 2) bool, degrees of freedom held at zero by supports; set by
+    #: the simulation.  A coupled matrix must leave them out of the solve
+    #: (zeroing them afterwards, exact for a diagonal mass, is wrong here).
+    fixed: np.ndarray | None = field(default=None, repr=False)
     kind = "consistent"
     iterations: int = 0
     weak_nodes: int = 0
@@ -134,38 +148,47 @@ class ConsistentMass:
         weighted = N.multiply(m_p[:, None]).tocsr()
         matrix = (N.T @ weighted).tocsr()
         self.lumped = N.T @ m_p
-        diagonal = matrix.diagonal()
-        self.active = diagonal > 1e-24 * self.reference_mass
+        self.active = matrix.diagonal() > 1e-24 * self.reference_mass
         if self.nonnegative and volume_p is not None:
             fraction = np.divide(N.T @ volume_p, self.node_integrals, out=np.ones(self.n_nodes), where=self.active)
             weak = self.active & (fraction < self.weak_fraction)
             self.weak_nodes = int(weak.sum())
             if self.weak_nodes:
                 matrix = _lump_couplings(matrix, weak)
-                diagonal = matrix.diagonal()
-        # empty nodes: identity rows, so the solvers see a definite block there
-        self.matrix = (matrix + sp.diags((~self.active).astype(float))).tocsr()
-        self._inverse_diagonal = 1.0 / np.where(self.active, diagonal, 1.0)
-        self._blended = False
+        self.matrix = matrix
+        # empty and fixed degrees of freedom leave the system (identity rows);
+        # one system for both components when they are fixed alike
+        excluded = ~self.active[:, None] if self.fixed is None else (~self.active[:, None] | self.fixed)
+        excluded = np.broadcast_to(excluded, (self.n_nodes, 2))
+        groups = [(0, 1)] if np.array_equal(excluded[:, 0], excluded[:, 1]) else [(0,), (1,)]
         self._direct = self.linear_solver == "direct" or (
             self.linear_solver == "auto" and np.count_nonzero(self.active) <= DIRECT_LIMIT
         )
-        self._factors = _factor(self.matrix) if self._direct else None
+        self._systems = [_System.build(matrix, list(columns), excluded[:, columns[0]], self._direct) for columns in groups]
 
     def apply(self, vector: np.ndarray) -> np.ndarray:
         """``M @ vector`` with the consistent matrix (empty rows zero)."""
-        return (self.matrix @ vector) * self.active[:, None]
+        return self.matrix @ vector
 
     def solve(self, rhs: np.ndarray, kind: str = "velocity") -> np.ndarray:
-        """Solve ``M x = rhs`` for the two columns of rhs (n_nodes, 2).
+        """Solve ``M x = rhs`` for the two columns of rhs (n_nodes, 2), fixed and
+        empty degrees of freedom held at zero.
 
         ``kind`` ("velocity" or "acceleration") keys CG's warm start: the
         last two solutions of the same kind are extrapolated.
         """
-        rhs = np.where(self.active[:, None], rhs, 0.0)
-        if not rhs.any():  # e.g. the relative momentum of a rigid motion
-            return np.zeros_like(rhs)
-        solution, converged = self._solve(rhs, kind)
+        solution = np.zeros_like(rhs)
+        for system in self._systems:
+            part = np.where(system.excluded[:, None], 0.0, rhs[:, system.columns])
+            if not part.any():  # e.g. the relative momentum of a rigid motion
+                continue
+            solution[:, system.columns] = self._solve_system(system, part, kind)
+        if not self._direct:
+            self._previous[kind] = (*self._previous.get(kind, ())[-1:], solution)
+        return solution
+
+    def _solve_system(self, system: "_System", rhs: np.ndarray, kind: str) -> np.ndarray:
+        solution, converged = self._solve(system, rhs, kind)
         if not converged:
             if self.fallback != "blend":
                 how = "the direct solve left a large residual" if self._direct else "CG did not converge"
@@ -174,54 +197,76 @@ class ConsistentMass:
                     f"(too few points per cell for the basis, or weakly supported nodes); use more points "
                     f"per cell, lumped mass, or solver.consistent_fallback = 'blend'"
                 )
-            self._blend_with_lumped()
-            solution, converged = self._solve(rhs, kind)
+            if not system.blended:
+                self.blended_steps += 1
+            system.blend_with(self._blend_target(), self.blend, self._direct)
+            solution, converged = self._solve(system, rhs, kind)
             if not converged:
                 raise SingularMassError(f"the blended mass matrix could not be solved either ({kind} system)")
-        if not self._direct:
-            self._previous[kind] = (*self._previous.get(kind, ())[-1:], solution)
         return solution
 
-    def _solve(self, rhs: np.ndarray, kind: str) -> tuple[np.ndarray, bool]:
+    def _solve(self, system: "_System", rhs: np.ndarray, kind: str) -> tuple[np.ndarray, bool]:
         if self._direct:
-            return _direct_solve(self._factors, self.matrix, rhs)
+            return _direct_solve(system.factors, system.matrix, rhs)
+        guess = self._initial_guess(rhs, kind, system)
         solution, converged, iterations = _preconditioned_cg(
-            self.matrix, rhs, self._initial_guess(rhs, kind), self._inverse_diagonal, self.tolerance, self.max_iterations
+            system.matrix, rhs, guess, system.inverse_diagonal, self.tolerance, self.max_iterations
         )
         self.iterations += iterations
         return solution, converged
 
-    def _initial_guess(self, rhs: np.ndarray, kind: str) -> np.ndarray:
+    def _initial_guess(self, rhs: np.ndarray, kind: str, system: "_System") -> np.ndarray:
         """Linear extrapolation of the last two solutions where they exist, the
         lumped solution elsewhere (for a rigid motion that is already exact)."""
-        scale = np.where(np.abs(self.lumped) > 1e-12 * self.reference_mass, self.lumped, 1.0 / self._inverse_diagonal)
+        scale = np.where(np.abs(self.lumped) > 1e-12 * self.reference_mass, self.lumped, 1.0 / system.inverse_diagonal)
         guess = rhs / scale[:, None]
-        history = self._previous.get(kind, ())
+        history = [h[:, system.columns] for h in self._previous.get(kind, ())]
         if len(history) == 2:
             older, last = history
             known = ((older != 0.0) & (last != 0.0)).any(axis=1)
             guess = np.where(known[:, None], 2.0 * last - older, guess)
         elif len(history) == 1:
             guess = np.where((history[0] != 0.0).any(axis=1)[:, None], history[0], guess)
-        return guess * self.active[:, None]
+        return np.where(system.excluded[:, None], 0.0, guess)
 
-    def _blend_with_lumped(self) -> None:
-        """The fallback: ``(1 - blend) M + blend diag(lumped)`` for this step."""
-        if self._blended:
-            return
-        diagonal = self.matrix.diagonal()
+    def _blend_target(self) -> np.ndarray:
+        """Positive diagonal to blend with: the lumped masses, or where row sums
+        are not all positive (q2, serendipity) the HRZ diagonal, ``M_ii`` scaled
+        to the total mass."""
         if np.all(self.lumped[self.active] > 0):
-            target = np.where(self.active, self.lumped, 1.0)
-        else:
-            # negative row sums (q2, serendipity): HRZ lumping instead, the
-            # diagonal scaled to the total mass, positive by construction
-            scale = self.lumped[self.active].sum() / diagonal[self.active].sum()
-            target = np.where(self.active, scale * diagonal, 1.0)
-        self.matrix = ((1.0 - self.blend) * self.matrix + self.blend * sp.diags(target)).tocsr()
-        self._inverse_diagonal = 1.0 / self.matrix.diagonal()
-        self._factors = _factor(self.matrix) if self._direct else None
-        self._blended = True
-        self.blended_steps += 1
+            return np.where(self.active, self.lumped, 1.0)
+        diagonal = self.matrix.diagonal()
+        scale = self.lumped[self.active].sum() / diagonal[self.active].sum()
+        return np.where(self.active, scale * diagonal, 1.0)
+
+
+@dataclass
+class _System:
+    """The consistent matrix for some of the two components, with the excluded
+    degrees of freedom (empty or fixed) replaced by identity rows."""
+
+    columns: list
+    excluded: np.ndarray
+    matrix: sp.csr_matrix
+    inverse_diagonal: np.ndarray
+    factors: object
+    blended: bool = False
+
+    @classmethod
+    def build(cls, matrix: sp.csr_matrix, columns: list, excluded: np.ndarray, direct: bool) -> "_System":
+        keep = sp.diags((~excluded).astype(float))
+        reduced = (keep @ matrix @ keep + sp.diags(excluded.astype(float))).tocsr()
+        return cls(columns, excluded, reduced, 1.0 / reduced.diagonal(), _factor(reduced) if direct else None)
+
+    def blend_with(self, target: np.ndarray, weight: float, direct: bool) -> None:
+        """The fallback: ``(1 - weight) M + weight diag(target)`` on the kept rows."""
+        if self.blended:
+            return
+        kept_target = np.where(self.excluded, 1.0, target)
+        self.matrix = ((1.0 - weight) * self.matrix + weight * sp.diags(kept_target)).tocsr()
+        self.inverse_diagonal = 1.0 / self.matrix.diagonal()
+        self.factors = _factor(self.matrix) if direct else None
+        self.blended = True
 
 
 #: a pivot this small against its own diagonal entry means singular
@@ -273,6 +318,14 @@ def _active(N: sp.csr_matrix, m_p: np.ndarray, lumped: np.ndarray, reference_mas
     else:  # a matrix of |N| on N's index arrays, for a transposed product only
         absolute = sp.csr_matrix((np.abs(N.data), N.indices, N.indptr), shape=N.shape).T @ m_p
     return (np.abs(lumped) > 1e-6 * absolute) & (absolute > 1e-12 * reference_mass)
+
+
+@numba.njit(cache=True)
+def _lumped_inverse(lumped, absolute, reference_mass, inverse, active):
+    """:func:`_active` and ``1 / m_i`` on the active nodes, from the sums."""
+    for i in range(len(lumped)):
+        active[i] = abs(lumped[i]) > 1e-6 * absolute[i] and absolute[i] > 1e-12 * reference_mass
+        inverse[i] = 1.0 / lumped[i] if active[i] else 0.0
 
 
 def _lump_couplings(matrix: sp.csr_matrix, weak: np.ndarray) -> sp.csr_matrix:

@@ -17,6 +17,7 @@ True
 
 from __future__ import annotations
 
+import functools
 import time as clock
 from dataclasses import dataclass, field
 from typing import Callable
@@ -28,6 +29,7 @@ from .effects.base import Stage, StepContext
 from .energy import EnergyBookkeeping
 from .expressions import compile_expression
 from .grid import Grid
+from .kernels.engines import TRANSFERS
 from .mass import ConsistentMass, LumpedMass, SingularMassError
 from .materials import make_material
 from .particles import Particles, seed_rectangle
@@ -79,23 +81,26 @@ class Simulation:
         self.body_slices = self.particles.body_slices()
         self.reference_mass = max(m.density for m in self.materials) * spec.spacing**2
         self.mass = self._mass_model()
-        self.critical_dt = critical_time_step(
-            spec.basis, scene.solver.mass, self.grid.discretization.element_width, max(m.wave_speed for m in self.materials)
-        )
-        self.dt = self._time_step()
-        self.n_steps = int(np.ceil(scene.time.end / self.dt - 1e-9))
         self.every = scene.output.every if scene.output else 0
         self.negative_mass = NegativeMassMonitor(
             self.reference_mass, scene.solver.negative_mass, applies=scene.solver.mass == "lumped"
         )
         self.energy = EnergyBookkeeping() if scene.output and scene.output.energy else None
-        declared = [*scene.loads, *([scene.damping] if scene.damping else []), *scene.supports]
-        declared += [self.energy] if self.energy else []
-        declared += observers or []
+        acting = [*scene.loads, *([scene.damping] if scene.damping else []), *scene.supports]
+        watching = [*([self.energy] if self.energy else []), *(observers or [])]
         self.effects: dict[Stage, list[tuple[str, Callable]]] = {stage: [] for stage in Stage}
-        for effect in declared:
+        for effect in acting:
             self.effects[effect.stage].append((effect.name, effect.bind(self)))
-        self.context = StepContext(self, dt=self.dt)
+        # supports must be known to a coupled mass, and to the critical time step
+        fixed = [action.fixed for _, action in self.effects[Stage.CONSTRAIN] if hasattr(action, "fixed")]
+        if fixed and isinstance(self.mass, ConsistentMass):
+            self.mass.fixed = np.logical_or.reduce(fixed)
+        self.dt = self._time_step()
+        self.n_steps = int(np.ceil(scene.time.end / self.dt - 1e-9))
+        for effect in watching:  # observers last: they may read dt and n_steps
+            self.effects[effect.stage].append((effect.name, effect.bind(self)))
+        self.transfer = TRANSFERS[getattr(scene.solver, "engine", "numba")](self)
+        self.context = self.transfer.context(self, self.dt)
         self.step_index = 0
         self.time = 0.0
         self.wall_time = 0.0
@@ -156,6 +161,12 @@ class Simulation:
         """Stored energy of all bodies (J per unit thickness), each by its own law."""
         return sum(material.strain_energy(self.particles, members) for material, members in zip(self.materials, self.body_slices))
 
+    @functools.cached_property
+    def critical_dt(self) -> float:
+        """Largest stable time step (s) at set-up, from ``M^-1 K``; 0 if none is
+        (see :mod:`femgrid_mpm.stability`).  Computed when first asked for."""
+        return critical_time_step(self)
+
     def body_index(self, name: str) -> int:
         return [body.name for body in self.scene.bodies].index(name)
 
@@ -170,17 +181,15 @@ class Simulation:
         """Paper steps 1-3: shape functions at the points, grid mass, grid velocity (Eq. 17)."""
         ctx, p = self.context, self.particles
         ctx.step, ctx.time = self.step_index, self.time
-        try:
-            ctx.N, ctx.dNdx, ctx.dNdy = self.grid.shape_functions(p.x)
-        except ValueError as error:
-            raise self._stop(f"a particle left the grid: {error}", "particle_left_grid") from None
-        self.mass.assemble(ctx.N, p.mass, p.volume)
-        self.negative_mass.check(self.mass.lumped, ctx.step, ctx.time, self.grid.nodes)
         # Work in the frame of one point (any frame is the same in exact
         # arithmetic): a uniform motion then has zero relative velocity and
         # moves exactly, with no round-off for small or negative masses to amplify.
         ctx.frame_velocity = p.v[0].copy()
-        relative_momentum = ctx.N.T @ (p.mass[:, None] * (p.v - ctx.frame_velocity))
+        try:  # P2G: N at the points, the grid mass, N.T @ (m_p (v_p - v_ref))
+            relative_momentum = self.transfer.to_grid(ctx, self.mass)
+        except ValueError as error:
+            raise self._stop(f"a particle left the grid: {error}", "particle_left_grid") from None
+        self.negative_mass.check(self.mass.lumped, ctx.step, ctx.time, self.grid.nodes)
         ctx.momentum = relative_momentum + self.mass.lumped[:, None] * ctx.frame_velocity
         ctx.velocity = self._solve(relative_momentum, "velocity") + ctx.frame_velocity
         self._constrain(ctx.velocity)
@@ -191,33 +200,22 @@ class Simulation:
         ctx, p, dt = self.project(), self.particles, self.dt
         if record:
             self._run(Stage.OBSERVE)
-        # 4-6: strain increment from the grid velocity (Eq. 18), then stress (Eq. 6)
-        relative_velocity = ctx.velocity - ctx.frame_velocity  # gradients sum to zero: same gradient
-        dv_dx = ctx.dNdx @ relative_velocity  # (n, 2): d(vx)/dx, d(vy)/dx
-        dv_dy = ctx.dNdy @ relative_velocity  # (n, 2): d(vx)/dy, d(vy)/dy
-        strain_increment = dt * np.column_stack([dv_dx[:, 0], dv_dy[:, 1], 0.5 * (dv_dy[:, 0] + dv_dx[:, 1])])
-        gradient_increment = dt * np.column_stack([dv_dx[:, 0], dv_dy[:, 0], dv_dx[:, 1], dv_dy[:, 1]])  # dt L
-        p.strain += strain_increment
-        for material, members in zip(self.materials, self.body_slices):
-            material.update(p, members, strain_increment, gradient_increment)
-        # 7: internal force (Eq. 11) with the volumes of time t, then declared forces
-        weighted_stress = p.volume[:, None] * p.stress
-        ctx.force = -(ctx.dNdx.T @ weighted_stress[:, [0, 2]] + ctx.dNdy.T @ weighted_stress[:, [2, 1]])
-        ctx.external = {}
+        # 4-7: strain increment from the grid velocity (Eq. 18), stress (Eq. 6), internal
+        # force -(dNdx.T @ V sigma_x + dNdy.T @ V sigma_y) with the volumes of time t (Eq. 11)
+        ctx.force = self.transfer.internal_force(ctx, dt, self.materials, self.body_slices)
+        ctx.external = {}  # then the declared forces
         self._run(Stage.EXTERNAL_FORCE)
         self._run(Stage.ADJUST_FORCE)
         ctx.acceleration = self._solve(ctx.force, "acceleration")
         self._constrain(ctx.acceleration)
         self._book_work(ctx)
-        # 8-10: velocity (Eq. 19) with the new forces, position (Eq. 20) with the
-        # grid velocity of time t, density (Eq. 21)
-        p.v += dt * (ctx.N @ ctx.acceleration)
-        p.x += dt * (ctx.N @ relative_velocity + ctx.frame_velocity)
-        p.density *= np.exp(-dt * (dv_dx[:, 0] + dv_dy[:, 1]))
+        # 8-10 (G2P): velocity v += dt N @ a (Eq. 19) with the new forces, position
+        # x += dt N @ v (Eq. 20) with the grid velocity of time t, density (Eq. 21)
+        checksum = self.transfer.to_points(ctx, dt)
         # 11
         self.step_index += 1
         self.time = self.step_index * dt
-        if not np.isfinite(p.v.sum() + p.x.sum() + p.stress.sum()):
+        if not np.isfinite(checksum):
             raise self._stop("the state is no longer finite (NaN or Inf)", "not_finite")
 
     def _solve(self, rhs: np.ndarray, kind: str) -> np.ndarray:
@@ -303,7 +301,7 @@ class Simulation:
             "steps": self.step_index,
             "time": self.time,
             "dt": self.dt,
-            "critical_dt": self.critical_dt,
+            "critical_dt": self.__dict__.get("critical_dt"),  # if it was estimated (CLI runs, dt = "auto")
             "wall_time": self.wall_time,
             "points": self.particles.n,
             "nodes": self.grid.n_nodes,

@@ -242,13 +242,13 @@ def test_info_with_overrides_and_an_unstable_time_step(tmp_path, capsys):
     """dt beyond the critical step: a one-line warning on stderr, exit 0."""
     path = write_scene(tmp_path, block())
     critical = Simulation(block()).critical_dt
-    code, stdout, err = run_cli(["info", path, "--set", f"time.dt={3 * critical!r}", "--basis", "q2"], capsys)
+    code, stdout, err = run_cli(["info", path, "--set", f"time.dt={3 * critical!r}", "--mass", "consistent"], capsys)
     assert code == 0
-    assert info_lines(stdout)["basis"] == "q2"
+    assert info_lines(stdout)["mass"] == "consistent"
     (warning,) = err.splitlines()
     assert warning.startswith("femgrid-mpm: warning: dt = ") and "exceeds the estimated critical time step" in warning
-    # q2's critical step is smaller than q1's
-    assert float(info_lines(stdout)["critical_dt"].split()[0]) < critical
+    # consistent mass has the smaller critical step (about half of lumped for q1)
+    assert float(info_lines(stdout)["critical_dt"].split()[0]) < 0.7 * critical
 
 
 def test_undeclared_effects_run_no_code(tmp_path, capsys, monkeypatch):

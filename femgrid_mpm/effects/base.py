@@ -18,7 +18,10 @@ Stages, in step order (see :meth:`femgrid_mpm.solver.Simulation.advance`):
     Forces that depend on the state or on the total (damping).
 ``constrain``
     Change a grid field in place: ``ctx.target`` is the grid velocity, then
-    the grid acceleration.  Contact comes first, supports last.
+    the grid acceleration.  Contact comes first, supports last.  An action
+    that holds degrees of freedom at zero for the whole run also exposes them
+    as ``action.fixed`` (bool, (n_nodes, 2)): a consistent mass couples the
+    nodes, so its solve must leave them out rather than zero them after.
 
 Adding an effect: one class here in ``effects/``, one line in
 ``effects/__init__.py``'s registry, one test that runs it alone.

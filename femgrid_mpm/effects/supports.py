@@ -43,4 +43,9 @@ class Support:
             ctx.target[rows, columns] = 0.0
 
         fix_nodes.nodes = nodes  # type: ignore[attr-defined]
+        # known before any step, so that a coupled (consistent) mass solve can
+        # leave these degrees of freedom out instead of zeroing them afterwards
+        fixed = np.zeros((simulation.grid.n_nodes, 2), dtype=bool)
+        fixed[rows, columns] = True
+        fix_nodes.fixed = fixed  # type: ignore[attr-defined]
         return fix_nodes
