@@ -88,7 +88,8 @@ class SolverSpec(_Model):
     ``consistent_fallback``: ``"error"`` or ``"blend"`` when the consistent
     mass matrix is singular (see :mod:`femgrid_mpm.mass`), with ``blend``
     the lumped weight; ``weak_fraction`` the volume fraction under which a
-    node is lumped; ``cg_tolerance`` CG's relative residual.
+    node is lumped; ``cg_tolerance`` CG's relative residual; ``engine``
+    the implementation of the step's transfers (:mod:`femgrid_mpm.kernels`).
     """
 
     mass: Literal["lumped", "consistent"] = "lumped"
@@ -97,6 +98,8 @@ class SolverSpec(_Model):
     blend: Annotated[float, Field(gt=0, le=1)] = 0.1
     weak_fraction: Annotated[float, Field(ge=0, lt=1)] = 0.01
     cg_tolerance: Annotated[float, Field(gt=0, lt=1)] = 1e-10
+    #: the step's transfers: compiled kernels, or scipy.sparse (the reference)
+    engine: Literal["numba", "scipy"] = "numba"
 
 
 class Material(_Model):

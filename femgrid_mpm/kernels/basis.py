@@ -1,0 +1,231 @@
+"""Compiled shape functions: every basis as a short sum of separated terms.
+
+Each local function of every basis here is a polynomial of degree at most
+``d`` in each cell coordinate, and in fact a short sum of products of 1D
+polynomials, ``phi_k(xi, eta) = sum_t U_i(t)(xi) W_j(t)(eta)``: one term for
+the tensor-product bases (q1, q2, cubic B-splines), two for the corner
+functions of serendipity.  :func:`separated_tables` derives that form once per
+grid from the basis's own definition (the monomial coefficients that
+:class:`~femgrid_mpm.bases.LocalPolynomials` fits to scikit-fem's ``lbasis``,
+or the per-cell tables of :class:`~femgrid_mpm.bases.TensorSplines`) by exact
+skeleton (cross) decomposition, and checks it reproduces them.  Evaluating a
+point is then a few 1D Horner evaluations and ``3 x n_terms`` products, the
+same numbers as :meth:`femgrid_mpm.Grid.shape_functions` to rounding (tested
+to 1e-12 for every registered basis).
+
+A point is located exactly as :meth:`femgrid_mpm.Grid.locate` does (same
+arithmetic, so the same element and cell coordinates bit for bit).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from ..bases import LocalPolynomials, TensorSplines
+
+
+@dataclass(frozen=True)
+class BasisTables:
+    """A grid's basis in separated form, as plain arrays for the kernels.
+
+    Attributes
+    ----------
+    geometry : ndarray, shape (5,)
+        ``lower_x, lower_y, upper_x, upper_y, 1 / element_width``.
+    n_elements : ndarray of int64, shape (2,)
+    factors_x, factors_y : ndarray, shape (n_tables, n_factors, degree + 1)
+        Coefficients (increasing powers) of the 1D factors along x and y;
+        one table per cell column (row) for bases whose pieces differ from
+        cell to cell (open-knot splines), else a single table.
+    table_x, table_y : ndarray of int32, shape (n_elements_x,), (n_elements_y,)
+        Which table each cell column (row) uses.
+    terms : ndarray of int32, shape (n_terms, 3)
+        ``(k, i, j)``: local function k gains ``c * U_i(xi) * W_j(eta)``,
+    term_weights : ndarray, shape (n_terms,)
+        with ``c`` from here.
+    connectivity : ndarray of int32, shape (n_elements, n_local)
+        Global node of each local function, element ``ix * n_elements_y + iy``.
+    """
+
+    geometry: np.ndarray
+    n_elements: np.ndarray
+    factors_x: np.ndarray
+    table_x: np.ndarray
+    factors_y: np.ndarray
+    table_y: np.ndarray
+    terms: np.ndarray
+    term_weights: np.ndarray
+    connectivity: np.ndarray
+
+    @property
+    def n_local(self) -> int:
+        return self.connectivity.shape[1]
+
+    def arrays(self) -> tuple:
+        """The arrays in the order the kernels take them."""
+        return (self.geometry, self.n_elements, self.factors_x, self.table_x, self.factors_y, self.table_y,
+                self.terms, self.term_weights, self.connectivity)
+
+
+def separated_tables(grid) -> BasisTables:
+    """The separated form of ``grid``'s basis (see the module docstring)."""
+    d = grid.discretization
+    local = d.local_basis
+    if isinstance(local, TensorSplines):
+        # per-cell tables (cell, power, function); function k = 4 a + b is X_a(xi) Y_b(eta)
+        factors_x = np.ascontiguousarray(np.swapaxes(local.tables[0], 1, 2))
+        factors_y = np.ascontiguousarray(np.swapaxes(local.tables[1], 1, 2))
+        table_x = np.arange(d.n_elements[0], dtype=np.int32)
+        table_y = np.arange(d.n_elements[1], dtype=np.int32)
+        terms = np.array([(4 * a + b, a, b) for a in range(4) for b in range(4)], dtype=np.int32)
+        weights = np.ones(len(terms))
+    elif isinstance(local, LocalPolynomials):
+        us, ws, separated = _skeleton_terms(local)
+        factors_x, factors_y = np.array(us)[None], np.array(ws)[None]
+        table_x = np.zeros(d.n_elements[0], dtype=np.int32)
+        table_y = np.zeros(d.n_elements[1], dtype=np.int32)
+        terms = np.array([term[:3] for term in separated], dtype=np.int32)
+        weights = np.array([term[3] for term in separated])
+    else:  # pragma: no cover - a new kind of local basis needs its separated form here
+        raise TypeError(f"no separated form for {type(local).__name__}")
+    geometry = np.array([*grid.lower, *grid.upper, 1.0 / d.element_width])
+    return BasisTables(
+        geometry=geometry,
+        n_elements=np.array(d.n_elements, dtype=np.int64),
+        factors_x=factors_x,
+        table_x=table_x,
+        factors_y=factors_y,
+        table_y=table_y,
+        terms=terms,
+        term_weights=weights,
+        connectivity=np.ascontiguousarray(d.connectivity, dtype=np.int32),
+    )
+
+
+def _skeleton_terms(local: LocalPolynomials):
+    """Exact skeleton decomposition of each local function's coefficient matrix.
+
+    ``C_k[a, b]`` (the coefficient of ``xi**a eta**b``) is peeled into
+    ``c * outer(u, w)`` terms, pivoting on its largest remaining entry
+    (complete pivoting); ``u`` and ``w`` are the pivot column and row, each
+    scaled to a largest coefficient of +1, so that 1D factors common to
+    several functions are found and evaluated once.
+    """
+    n_1d = local.degree + 1
+    us: list[np.ndarray] = []
+    ws: list[np.ndarray] = []
+    terms = []
+
+    def normalized(vector):
+        pivot = vector[np.argmax(np.abs(vector))]
+        return vector / pivot, pivot
+
+    def index_of(factors, vector):
+        for index, known in enumerate(factors):
+            if np.allclose(known, vector, rtol=0, atol=1e-12):
+                return index
+        factors.append(vector)
+        return len(factors) - 1
+
+    for k in range(local.n_local):
+        coefficients = local.values[:, k].reshape(n_1d, n_1d)
+        remainder = coefficients.copy()
+        scale = np.abs(coefficients).max()
+        while np.abs(remainder).max() > 1e-13 * scale:
+            a, b = np.unravel_index(np.argmax(np.abs(remainder)), remainder.shape)
+            u, u_scale = normalized(remainder[:, b] / remainder[a, b])
+            w, w_scale = normalized(remainder[a, :].copy())
+            i, j = index_of(us, u), index_of(ws, w)
+            terms.append((k, i, j, u_scale * w_scale))
+            remainder = remainder - u_scale * w_scale * np.outer(us[i], ws[j])
+        rebuilt = sum(c * np.outer(us[i], ws[j]) for kk, i, j, c in terms if kk == k)
+        if np.abs(rebuilt - coefficients).max() > 1e-12 * scale:  # pragma: no cover
+            raise AssertionError(f"separated form of local function {k} does not reproduce it")
+    return us, ws, terms
+
+
+# -- kernels -------------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True)
+def locate_point(px, py, geometry, n_elements):
+    """Element and cell coordinates of one point, as :meth:`Grid.locate`; element -1 if outside."""
+    if not (px >= geometry[0] and px <= geometry[2] and py >= geometry[1] and py <= geometry[3]):
+        return -1, 0.0, 0.0, 0, 0
+    sx = (px - geometry[0]) * geometry[4]
+    sy = (py - geometry[1]) * geometry[4]
+    ix = min(np.int32(sx), np.int32(n_elements[0] - 1))
+    iy = min(np.int32(sy), np.int32(n_elements[1] - 1))
+    return ix * np.int32(n_elements[1]) + iy, sx - ix, sy - iy, ix, iy
+
+
+@numba.njit(cache=True)
+def _factors(s, factors, table, values, slopes):
+    """Values and slopes of the 1D factors of one table at s (Horner)."""
+    n_factors, n_powers = factors.shape[1], factors.shape[2]
+    for i in range(n_factors):
+        value = factors[table, i, n_powers - 1]
+        slope = 0.0
+        for a in range(n_powers - 2, -1, -1):
+            slope = slope * s + value
+            value = value * s + factors[table, i, a]
+        values[i] = value
+        slopes[i] = slope
+
+
+@numba.njit(cache=True)
+def evaluate_point(px, py, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
+                   fx, dfx, fy, dfy, w, wx, wy):
+    """Shape functions of one point into ``w, wx, wy`` (n_local); returns its element (-1 if outside)."""
+    element, xi, eta, ix, iy = locate_point(px, py, geometry, n_elements)
+    if element < 0:
+        return element
+    _factors(xi, factors_x, table_x[ix], fx, dfx)
+    _factors(eta, factors_y, table_y[iy], fy, dfy)
+    scale = geometry[4]
+    for k in range(w.shape[0]):
+        w[k] = 0.0
+        wx[k] = 0.0
+        wy[k] = 0.0
+    for t in range(terms.shape[0]):
+        k, i, j = terms[t, 0], terms[t, 1], terms[t, 2]
+        c = term_weights[t]
+        w[k] += c * fx[i] * fy[j]
+        wx[k] += c * dfx[i] * fy[j]
+        wy[k] += c * fx[i] * dfy[j]
+    for k in range(w.shape[0]):
+        wx[k] *= scale
+        wy[k] *= scale
+    return element
+
+
+@numba.njit(cache=True)
+def scratch(factors_x, factors_y, n_local):
+    """Per-point work arrays for :func:`evaluate_point`."""
+    return (np.empty(factors_x.shape[1]), np.empty(factors_x.shape[1]), np.empty(factors_y.shape[1]),
+            np.empty(factors_y.shape[1]), np.empty(n_local), np.empty(n_local), np.empty(n_local))
+
+
+@numba.njit(cache=True)
+def shape_function_data(x, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity,
+                        values, d_x, d_y, nodes):
+    """``N, dNdx, dNdy`` of every point as fixed-width rows (n, n_local), and their nodes.
+
+    Returns the first point outside the grid, or -1.
+    """
+    n_local = connectivity.shape[1]
+    fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
+    for p in range(x.shape[0]):
+        element = evaluate_point(x[p, 0], x[p, 1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                                 terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
+        if element < 0:
+            return p
+        for k in range(n_local):
+            values[p, k] = w[k]
+            d_x[p, k] = wx[k]
+            d_y[p, k] = wy[k]
+            nodes[p, k] = connectivity[element, k]
+    return -1

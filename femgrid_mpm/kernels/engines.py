@@ -1,0 +1,233 @@
+"""The two engines of the step's transfers: scipy (the reference) and numba (the default).
+
+:meth:`femgrid_mpm.solver.Simulation.advance` is written once against this
+interface (``[solver] engine`` picks the implementation):
+
+``to_grid(ctx, mass) -> relative momentum``
+    P2G: shape functions at the points, the grid mass (``mass`` is
+    assembled), ``N.T @ (m_p (v_p - v_ref))``.
+``internal_force(ctx, dt, materials, body_slices) -> force``
+    Strain increment from the grid velocity (Eq. 18), each body's material
+    update (Eq. 6), ``-(dNdx.T @ V sigma_x + dNdy.T @ V sigma_y)`` (Eq. 11).
+``to_points(ctx, dt) -> checksum``
+    G2P: ``v += dt N @ a``, ``x += dt (N @ v_rel + v_ref)``, density (Eqs.
+    19-21); returns ``sum(v) + sum(x) + sum(stress)`` for the finiteness check.
+
+:class:`ScipyTransfer` spells the paper's sparse linear algebra out with
+``scipy.sparse`` matrices; :class:`CompiledTransfer` runs the kernels of
+:mod:`.transfer` and builds the matrices ``ctx.N``, ``ctx.dNdx``,
+``ctx.dNdy`` only if an effect reads them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..effects.base import StepContext
+from ..materials import LinearElastic
+from . import transfer as kernels
+from .basis import separated_tables, shape_function_data
+
+
+class ScipyTransfer:
+    """The reference engine: shape-function matrices and scipy.sparse products."""
+
+    name = "scipy"
+
+    def __init__(self, simulation):
+        self.grid = simulation.grid
+        self._divergence = None
+
+    def context(self, simulation, dt: float) -> StepContext:
+        return StepContext(simulation, dt=dt)
+
+    def to_grid(self, ctx: StepContext, mass) -> np.ndarray:
+        p = ctx.particles
+        ctx.N, ctx.dNdx, ctx.dNdy = self.grid.shape_functions(p.x)  # ValueError if a point left the grid
+        mass.assemble(ctx.N, p.mass, p.volume)
+        return ctx.N.T @ (p.mass[:, None] * (p.v - ctx.frame_velocity))
+
+    def internal_force(self, ctx: StepContext, dt: float, materials, body_slices) -> np.ndarray:
+        p = ctx.particles
+        relative_velocity = ctx.velocity - ctx.frame_velocity  # gradients sum to zero: same gradient
+        dv_dx = ctx.dNdx @ relative_velocity  # (n, 2): d(vx)/dx, d(vy)/dx
+        dv_dy = ctx.dNdy @ relative_velocity  # (n, 2): d(vx)/dy, d(vy)/dy
+        strain_increment = dt * np.column_stack([dv_dx[:, 0], dv_dy[:, 1], 0.5 * (dv_dy[:, 0] + dv_dx[:, 1])])
+        gradient_increment = dt * np.column_stack([dv_dx[:, 0], dv_dy[:, 0], dv_dx[:, 1], dv_dy[:, 1]])  # dt L
+        p.strain += strain_increment
+        for material, members in zip(materials, body_slices):
+            material.update(p, members, strain_increment, gradient_increment)
+        self._divergence = dv_dx[:, 0] + dv_dy[:, 1]
+        weighted_stress = p.volume[:, None] * p.stress  # volumes of time t
+        return -(ctx.dNdx.T @ weighted_stress[:, [0, 2]] + ctx.dNdy.T @ weighted_stress[:, [2, 1]])
+
+    def to_points(self, ctx: StepContext, dt: float) -> float:
+        p = ctx.particles
+        relative_velocity = ctx.velocity - ctx.frame_velocity
+        p.v += dt * (ctx.N @ ctx.acceleration)
+        p.x += dt * (ctx.N @ relative_velocity + ctx.frame_velocity)
+        p.density *= np.exp(-dt * self._divergence)
+        return p.v.sum() + p.x.sum() + p.stress.sum()
+
+
+class CompiledTransfer:
+    """The numba engine: fused kernels over the points, buffers reused from step to step."""
+
+    name = "numba"
+
+    def __init__(self, simulation):
+        grid = simulation.grid
+        self.grid = grid
+        self.basis = separated_tables(grid)
+        self._arrays = self.basis.arrays()
+        self.signed = not grid.nonnegative
+        self.matrices = ShapeFunctionMatrices(grid, self.basis)
+        n, n_nodes = simulation.particles.n, grid.n_nodes
+        self.grid_mass = np.zeros(n_nodes)
+        self.grid_absolute = np.zeros(n_nodes if self.signed else 1)
+        self.grid_volume = np.zeros(1)
+        self.divergence = np.zeros(n)
+        self._strain_increment = self._gradient_increment = None
+        self._stress_total = 0.0
+        self.stencil = None
+        self._no_slots = np.zeros((1, 1), dtype=np.int32)
+        self._no_matrix = np.zeros((1, 1))
+        self._lame = None
+        materials = simulation.materials
+        if all(type(material) is LinearElastic for material in materials):
+            self._lame = np.array([[m.lame_lambda, 2.0 * m.shear_modulus] for m in materials])
+
+    def context(self, simulation, dt: float) -> StepContext:
+        return OnDemandContext(simulation, self.matrices, dt=dt)
+
+    def to_grid(self, ctx: StepContext, mass) -> np.ndarray:
+        p = ctx.particles
+        self.matrices.invalidate()
+        momentum = np.empty((self.grid.n_nodes, 2))
+        stencil = getattr(mass, "stencil", None)
+        want_volume = bool(getattr(mass, "wants_volume", False))
+        if want_volume and len(self.grid_volume) != self.grid.n_nodes:
+            self.grid_volume = np.zeros(self.grid.n_nodes)
+        outside = kernels.p2g(
+            p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, want_volume, stencil is not None,
+            *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum,
+            self._no_slots if stencil is None else stencil.slots,
+            self._no_matrix if stencil is None else stencil.values,
+        )
+        if outside >= 0:
+            self.grid.locate(p.x)  # raises the ValueError naming the points outside
+            raise AssertionError(f"point {outside} is outside the grid")  # pragma: no cover
+        if hasattr(mass, "assemble_sums"):
+            mass.assemble_sums(self.grid_mass, self.grid_absolute if self.signed else None,
+                               self.grid_volume if want_volume else None)
+        else:  # a mass model that needs the matrices
+            mass.assemble(ctx.N, p.mass, p.volume)
+        return momentum
+
+    def internal_force(self, ctx: StepContext, dt: float, materials, body_slices) -> np.ndarray:
+        p = ctx.particles
+        force = np.empty((self.grid.n_nodes, 2))
+        if self._lame is not None:
+            self._stress_total = kernels.linear_elastic_stress_and_force(
+                p.x, ctx.velocity, ctx.frame_velocity, dt, p.mass, p.density, p.body, self._lame,
+                *self._arrays, p.strain, p.stress, force, self.divergence,
+            )
+            return force
+        if self._strain_increment is None:
+            self._strain_increment = np.empty((p.n, 3))
+            self._gradient_increment = np.empty((p.n, 4))
+        kernels.velocity_gradient(p.x, ctx.velocity, ctx.frame_velocity, dt, *self._arrays, p.strain,
+                                  self._strain_increment, self._gradient_increment, self.divergence)
+        for material, members in zip(materials, body_slices):
+            material.update(p, members, self._strain_increment, self._gradient_increment)
+        self._stress_total = kernels.internal_force(p.x, p.mass, p.density, p.stress, *self._arrays, force)
+        return force
+
+    def to_points(self, ctx: StepContext, dt: float) -> float:
+        p = ctx.particles
+        total = kernels.g2p(p.x, p.v, p.density, ctx.acceleration, ctx.velocity, ctx.frame_velocity, dt,
+                            self.divergence, *self._arrays)
+        self.matrices.invalidate()  # the points moved
+        return total + self._stress_total
+
+
+class ShapeFunctionMatrices:
+    """``N, dNdx, dNdy`` as scipy CSR matrices over buffers the kernel fills, on demand.
+
+    The matrices are created once and refilled in place when asked for after
+    the points moved (each owns its index arrays, as
+    :meth:`femgrid_mpm.Grid.shape_functions` promises).  Whatever an effect
+    did to them (scipy sorts indices in place in some operations) is undone
+    by the next refill.
+    """
+
+    def __init__(self, grid, basis):
+        self.grid = grid
+        self.basis = basis
+        self._fresh = False
+        self._matrices = None
+        self._n = -1
+
+    def invalidate(self) -> None:
+        self._fresh = False
+
+    def get(self, x: np.ndarray) -> tuple:
+        if self._fresh:
+            return self._matrices
+        n, n_local = len(x), self.basis.n_local
+        if n != self._n or not self._intact():
+            self._allocate(n, n_local)
+        data, nodes = self._data, self._nodes
+        outside = shape_function_data(x, *self.basis.arrays(), data[0], data[1], data[2], nodes)
+        if outside >= 0:
+            self.grid.locate(x)  # raises
+        for matrix, own in zip(self._matrices, self._indices):
+            np.copyto(own, nodes.reshape(-1))
+            matrix.has_sorted_indices = False
+            matrix.has_canonical_format = False
+        self._fresh = True
+        return self._matrices
+
+    def _allocate(self, n: int, n_local: int) -> None:
+        self._n = n
+        self._data = [np.zeros((n, n_local)) for _ in range(3)]
+        self._nodes = np.zeros((n, n_local), dtype=np.int32)
+        self._indices = [np.zeros(n * n_local, dtype=np.int32) for _ in range(3)]
+        indptr = np.arange(0, n * n_local + 1, n_local, dtype=np.int32)
+        shape = (n, self.grid.n_nodes)
+        self._matrices = tuple(
+            sp.csr_matrix((data.reshape(-1), indices, indptr.copy()), shape=shape, copy=False)
+            for data, indices in zip(self._data, self._indices)
+        )
+        self._views = [(m.data, m.indices) for m in self._matrices]
+
+    def _intact(self) -> bool:
+        """The matrices still use our buffers (no operation replaced their arrays)."""
+        return all(m.data is data and m.indices is indices for m, (data, indices) in zip(self._matrices, self._views))
+
+
+class OnDemandContext(StepContext):
+    """A :class:`StepContext` whose ``N``, ``dNdx``, ``dNdy`` are built when first read in a step."""
+
+    def __init__(self, simulation, matrices: ShapeFunctionMatrices, **fields):
+        self._shape_functions = matrices
+        super().__init__(simulation, **fields)
+
+    def _matrix(index: int):  # noqa: N805 - a property factory used in the class body
+        def get(self):
+            return self._shape_functions.get(self.simulation.particles.x)[index]
+
+        def set_(self, value):
+            if value is not None:
+                raise AttributeError("the numba engine computes N, dNdx and dNdy from the points")
+
+        return property(get, set_)
+
+    N = _matrix(0)
+    dNdx = _matrix(1)
+    dNdy = _matrix(2)
+    del _matrix
+
+
+TRANSFERS = {"scipy": ScipyTransfer, "numba": CompiledTransfer}
