@@ -140,7 +140,9 @@ BAD_SCENES = [
 #: problems found only once the simulation is built (supports, auto time step, initial velocities)
 BAD_BUILDS = [
     ("support selecting no node", appended("[[supports]]\nwhere = 'x < -100'"), "supports[0].where", "selects no grid node"),
-    ("auto dt without a stable step", replaced("dt = 0.01", 'dt = "auto"').replace('basis = "q1"', 'basis = "serendipity"'),
+    # q2 consistent mass on a block that ends inside elements is singular: no stable step
+    ("auto dt without a stable step",
+     replaced("dt = 0.01", 'dt = "auto"').replace('basis = "q1"', 'basis = "q2"').replace('mass = "lumped"', 'mass = "consistent"'),
      "time.dt", "no stable time step"),
     ("NaN initial velocity", replaced('"0.1*cos(pi*x/5)"', '"sqrt(-1 - x)"'), "bodies[0].velocity", "NaN or infinity at 16 point(s)"),
     ("infinite initial velocity", replaced('"0.1*cos(pi*x/5)"', '"1/(x - x)"'), "bodies[0].velocity", "NaN or infinity"),
