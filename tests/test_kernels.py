@@ -11,7 +11,7 @@ import pytest
 
 from femgrid_mpm import Grid
 from femgrid_mpm.bases import BASES
-from femgrid_mpm.kernels.basis import separated_tables, shape_function_data
+from femgrid_mpm.kernels.basis import evaluate_shape_functions, separated_tables, shape_function_data
 from femgrid_mpm.scene import Scene
 from femgrid_mpm.solver import Simulation
 
@@ -35,13 +35,24 @@ def test_compiled_shape_functions_match_the_grid(basis):
     n, n_local = len(points), tables.n_local
     values, d_x, d_y = (np.empty((n, n_local)) for _ in range(3))
     nodes = np.empty((n, n_local), dtype=np.int32)
-    assert shape_function_data(points, *tables.arrays(), values, d_x, d_y, nodes) == -1
     N, dNdx, dNdy = grid.shape_functions(points)
-    np.testing.assert_array_equal(nodes.ravel(), N.indices)
-    np.testing.assert_allclose(values.ravel(), N.data, rtol=0, atol=1e-12)
     scale = 1.0 / grid.discretization.element_width  # gradients are O(1 / width)
-    np.testing.assert_allclose(d_x.ravel(), dNdx.data, rtol=0, atol=1e-12 * scale)
-    np.testing.assert_allclose(d_y.ravel(), dNdy.data, rtol=0, atol=1e-12 * scale)
+    kernels = [shape_function_data, evaluate_shape_functions]  # the flat (any basis) and the fastest kernel
+    for kernel in kernels:
+        values[:], d_x[:], d_y[:], nodes[:] = np.nan, np.nan, np.nan, -1
+        arguments = tables.arrays() if kernel is shape_function_data else (tables,)
+        assert kernel(*arguments[:0], *((points,) if kernel is shape_function_data else (tables, points)),
+                      *(arguments if kernel is shape_function_data else ()), values, d_x, d_y, nodes) == -1
+        np.testing.assert_array_equal(nodes.ravel(), N.indices)
+        np.testing.assert_allclose(values.ravel(), N.data, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(d_x.ravel(), dNdx.data, rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(d_y.ravel(), dNdy.data, rtol=0, atol=1e-12 * scale)
+
+
+def test_tensor_kernels_cover_the_tensor_bases():
+    """q1, q2 and both cubic splines take the unrolled tensor kernels; serendipity the flat ones."""
+    tensor = {name for name in BASIS_NAMES if separated_tables(Grid(name, (0, 0), (2, 2), 0.5)).tensor is not None}
+    assert tensor == {"q1", "q2", "bspline3", "bspline3_open"}
 
 
 @pytest.mark.parametrize("basis", BASIS_NAMES)

@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numba
+from numba.extending import overload
 import numpy as np
 
 from ..bases import LocalPolynomials, TensorSplines
@@ -59,15 +60,42 @@ class BasisTables:
     terms: np.ndarray
     term_weights: np.ndarray
     connectivity: np.ndarray
+    tensor: "TensorTables | None" = None
 
     @property
     def n_local(self) -> int:
         return self.connectivity.shape[1]
 
     def arrays(self) -> tuple:
-        """The arrays in the order the kernels take them."""
+        """The arrays of the flat (any basis) kernels, in the order they take them."""
         return (self.geometry, self.n_elements, self.factors_x, self.table_x, self.factors_y, self.table_y,
                 self.terms, self.term_weights, self.connectivity)
+
+
+@dataclass(frozen=True)
+class TensorTables:
+    """A tensor-product basis, ``phi_(i n1 + j) = U_i(xi) W_j(eta)``, for the fast kernels.
+
+    ``marker`` is a tuple of ``n1`` zeros: its length is a compile-time
+    constant for numba, so each kind of basis gets kernels with fully
+    unrolled loops over its ``n1 x n1`` nodes and sum factorization.
+    ``order[s]`` is the grid's local index of tensor slot ``s``;
+    ``connectivity`` is the grid's, permuted to tensor order.
+    """
+
+    marker: tuple
+    geometry: np.ndarray
+    n_elements: np.ndarray
+    factors_x: np.ndarray
+    table_x: np.ndarray
+    factors_y: np.ndarray
+    table_y: np.ndarray
+    connectivity: np.ndarray
+    order: np.ndarray
+
+    def arrays(self) -> tuple:
+        return (self.marker, self.geometry, self.n_elements, self.factors_x, self.table_x, self.factors_y,
+                self.table_y, self.connectivity)
 
 
 def separated_tables(grid) -> BasisTables:
@@ -92,17 +120,39 @@ def separated_tables(grid) -> BasisTables:
     else:  # pragma: no cover - a new kind of local basis needs its separated form here
         raise TypeError(f"no separated form for {type(local).__name__}")
     geometry = np.array([*grid.lower, *grid.upper, 1.0 / d.element_width])
-    return BasisTables(
-        geometry=geometry,
-        n_elements=np.array(d.n_elements, dtype=np.int64),
-        factors_x=factors_x,
-        table_x=table_x,
-        factors_y=factors_y,
-        table_y=table_y,
-        terms=terms,
-        term_weights=weights,
-        connectivity=np.ascontiguousarray(d.connectivity, dtype=np.int32),
-    )
+    n_elements = np.array(d.n_elements, dtype=np.int64)
+    connectivity = np.ascontiguousarray(d.connectivity, dtype=np.int32)
+    tensor = _tensor_form(factors_x, factors_y, terms, weights)
+    if tensor is not None:
+        fx, fy, order = tensor
+        tensor = TensorTables((0,) * fx.shape[1], geometry, n_elements, fx, table_x, fy, table_y,
+                              np.ascontiguousarray(connectivity[:, order]), order)
+    return BasisTables(geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, weights, connectivity,
+                       tensor)
+
+
+def _tensor_form(factors_x, factors_y, terms, weights):
+    """``(factors_x, factors_y, order)`` if every function is one product ``U_i W_j``
+    over a full ``n1 x n1`` set with ``n1 - 1`` the degree (q1, q2, cubic
+    splines), the weights folded into the factors; else None (serendipity)."""
+    n1 = factors_x.shape[2]
+    if not (factors_x.shape[1] == factors_y.shape[1] == n1 and len(terms) == n1 * n1 and n1 in (2, 3, 4)):
+        return None
+    if len(set(terms[:, 0].tolist())) != len(terms) or len(set(map(tuple, terms[:, 1:].tolist()))) != len(terms):
+        return None
+    weight = np.zeros((n1, n1))
+    order = np.zeros(n1 * n1, dtype=np.int64)
+    for (k, i, j), c in zip(terms, weights):
+        weight[i, j] = c
+        order[i * n1 + j] = k
+    # weight = alpha_i beta_j: fold alpha into U_i and beta into W_j
+    beta = weight[0, :]
+    alpha = weight[:, 0] / beta[0]
+    if np.abs(np.outer(alpha, beta) - weight).max() > 1e-12 * np.abs(weight).max():
+        return None
+    fx = factors_x * alpha[None, :, None]
+    fy = factors_y * beta[None, :, None]
+    return np.ascontiguousarray(fx), np.ascontiguousarray(fy), order
 
 
 def _skeleton_terms(local: LocalPolynomials):
@@ -120,7 +170,9 @@ def _skeleton_terms(local: LocalPolynomials):
     terms = []
 
     def normalized(vector):
-        pivot = vector[np.argmax(np.abs(vector))]
+        # the first of the largest entries (ties within rounding: (1 - s)^3 has -3 and 3)
+        magnitude = np.abs(vector)
+        pivot = vector[np.flatnonzero(magnitude >= (1 - 1e-9) * magnitude.max())[0]]
         return vector / pivot, pivot
 
     def index_of(factors, vector):
@@ -134,7 +186,7 @@ def _skeleton_terms(local: LocalPolynomials):
         coefficients = local.values[:, k].reshape(n_1d, n_1d)
         remainder = coefficients.copy()
         scale = np.abs(coefficients).max()
-        while np.abs(remainder).max() > 1e-13 * scale:
+        while np.abs(remainder).max() > 1e-12 * scale:  # the fitted coefficients carry ~1e-14
             a, b = np.unravel_index(np.argmax(np.abs(remainder)), remainder.shape)
             u, u_scale = normalized(remainder[:, b] / remainder[a, b])
             w, w_scale = normalized(remainder[a, :].copy())
@@ -229,3 +281,90 @@ def shape_function_data(x, geometry, n_elements, factors_x, table_x, factors_y, 
             d_y[p, k] = wy[k]
             nodes[p, k] = connectivity[element, k]
     return -1
+
+
+# -- tensor-product kernels: loops over n1 x n1 nodes unrolled at compile time ---------------------------
+
+
+def factors_1d(s, factors, table, scale, marker):  # pragma: no cover - replaced by the overload in numba
+    """Values and slopes (times ``scale``) of the ``len(marker)`` 1D factors at s, as tuples."""
+    raise NotImplementedError("only callable from compiled code")
+
+
+@overload(factors_1d, inline="always")
+def _factors_1d(s, factors, table, scale, marker):
+    n1 = len(marker.types)
+    if n1 == 2:
+        def linear(s, factors, table, scale, marker):
+            c = factors
+            t = table
+            return ((c[t, 0, 1] * s + c[t, 0, 0], c[t, 1, 1] * s + c[t, 1, 0]),
+                    (c[t, 0, 1] * scale, c[t, 1, 1] * scale))
+        return linear
+    if n1 == 3:
+        def quadratic(s, factors, table, scale, marker):
+            c = factors
+            t = table
+            return (((c[t, 0, 2] * s + c[t, 0, 1]) * s + c[t, 0, 0],
+                     (c[t, 1, 2] * s + c[t, 1, 1]) * s + c[t, 1, 0],
+                     (c[t, 2, 2] * s + c[t, 2, 1]) * s + c[t, 2, 0]),
+                    ((2.0 * c[t, 0, 2] * s + c[t, 0, 1]) * scale,
+                     (2.0 * c[t, 1, 2] * s + c[t, 1, 1]) * scale,
+                     (2.0 * c[t, 2, 2] * s + c[t, 2, 1]) * scale))
+        return quadratic
+    if n1 == 4:
+        def cubic(s, factors, table, scale, marker):
+            c = factors
+            t = table
+            return ((((c[t, 0, 3] * s + c[t, 0, 2]) * s + c[t, 0, 1]) * s + c[t, 0, 0],
+                     ((c[t, 1, 3] * s + c[t, 1, 2]) * s + c[t, 1, 1]) * s + c[t, 1, 0],
+                     ((c[t, 2, 3] * s + c[t, 2, 2]) * s + c[t, 2, 1]) * s + c[t, 2, 0],
+                     ((c[t, 3, 3] * s + c[t, 3, 2]) * s + c[t, 3, 1]) * s + c[t, 3, 0]),
+                    (((3.0 * c[t, 0, 3] * s + 2.0 * c[t, 0, 2]) * s + c[t, 0, 1]) * scale,
+                     ((3.0 * c[t, 1, 3] * s + 2.0 * c[t, 1, 2]) * s + c[t, 1, 1]) * scale,
+                     ((3.0 * c[t, 2, 3] * s + 2.0 * c[t, 2, 2]) * s + c[t, 2, 1]) * scale,
+                     ((3.0 * c[t, 3, 3] * s + 2.0 * c[t, 3, 2]) * s + c[t, 3, 1]) * scale))
+        return cubic
+    return None
+
+
+@numba.njit(cache=True, inline="always")
+def tensor_weights(px, py, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y):
+    """Element (-1 if outside) and the 1D factors ``(fx, dfx, fy, dfy)`` of one point."""
+    element, xi, eta, ix, iy = locate_point(px, py, geometry, n_elements)
+    if element < 0:
+        ix = 0
+        iy = 0
+    scale = geometry[4]
+    fx, dfx = factors_1d(xi, factors_x, table_x[ix], scale, marker)
+    fy, dfy = factors_1d(eta, factors_y, table_y[iy], scale, marker)
+    return element, fx, dfx, fy, dfy
+
+
+@numba.njit(cache=True)
+def tensor_shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                               connectivity, order, values, d_x, d_y, nodes):
+    """:func:`shape_function_data` for tensor bases, in the grid's local order."""
+    n1 = len(marker)
+    for p in range(x.shape[0]):
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
+                                                   factors_x, table_x, factors_y, table_y)
+        if element < 0:
+            return p
+        for i in range(n1):
+            for j in range(n1):
+                k = order[i * n1 + j]
+                values[p, k] = fx[i] * fy[j]
+                d_x[p, k] = dfx[i] * fy[j]
+                d_y[p, k] = fx[i] * dfy[j]
+                nodes[p, k] = connectivity[element, i * n1 + j]
+    return -1
+
+
+def evaluate_shape_functions(tables: BasisTables, x: np.ndarray, values, d_x, d_y, nodes) -> int:
+    """Fill ``(n, n_local)`` arrays with ``N, dNdx, dNdy`` and node indices in the
+    grid's local order, by the tensor kernel where the basis allows; returns
+    the first point outside the grid, or -1."""
+    if tables.tensor is not None:
+        return tensor_shape_function_data(x, *tables.tensor.arrays(), tables.tensor.order, values, d_x, d_y, nodes)
+    return shape_function_data(x, *tables.arrays(), values, d_x, d_y, nodes)

@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from ..effects.base import StepContext
 from ..materials import LinearElastic
 from . import transfer as kernels
-from .basis import separated_tables, shape_function_data
+from .basis import evaluate_shape_functions, separated_tables
 
 
 class ScipyTransfer:
@@ -80,7 +80,13 @@ class CompiledTransfer:
         grid = simulation.grid
         self.grid = grid
         self.basis = separated_tables(grid)
-        self._arrays = self.basis.arrays()
+        # tensor-product bases take the unrolled, sum-factorized kernels
+        family = "tensor" if self.basis.tensor is not None else "flat"
+        self._arrays = self.basis.tensor.arrays() if family == "tensor" else self.basis.arrays()
+        self._p2g, self._stress_and_force, self._velocity_gradient, self._internal_force, self._g2p = (
+            getattr(kernels, f"{family}_{name}")
+            for name in ("p2g", "linear_elastic_stress_and_force", "velocity_gradient", "internal_force", "g2p")
+        )
         self.signed = not grid.nonnegative
         self.matrices = ShapeFunctionMatrices(grid, self.basis)
         n, n_nodes = simulation.particles.n, grid.n_nodes
@@ -109,7 +115,7 @@ class CompiledTransfer:
         want_volume = bool(getattr(mass, "wants_volume", False))
         if want_volume and len(self.grid_volume) != self.grid.n_nodes:
             self.grid_volume = np.zeros(self.grid.n_nodes)
-        outside = kernels.p2g(
+        outside = self._p2g(
             p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, want_volume, stencil is not None,
             *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum,
             self._no_slots if stencil is None else stencil.slots,
@@ -128,26 +134,28 @@ class CompiledTransfer:
     def internal_force(self, ctx: StepContext, dt: float, materials, body_slices) -> np.ndarray:
         p = ctx.particles
         force = np.empty((self.grid.n_nodes, 2))
+        self._relative = ctx.velocity - ctx.frame_velocity  # after the constraints, as the reference
         if self._lame is not None:
-            self._stress_total = kernels.linear_elastic_stress_and_force(
-                p.x, ctx.velocity, ctx.frame_velocity, dt, p.mass, p.density, p.body, self._lame,
+            self._stress_total = self._stress_and_force(
+                p.x, self._relative, dt, p.mass, p.density, p.body, self._lame,
                 *self._arrays, p.strain, p.stress, force, self.divergence,
             )
             return force
         if self._strain_increment is None:
             self._strain_increment = np.empty((p.n, 3))
             self._gradient_increment = np.empty((p.n, 4))
-        kernels.velocity_gradient(p.x, ctx.velocity, ctx.frame_velocity, dt, *self._arrays, p.strain,
+        self._velocity_gradient(p.x, self._relative, dt, *self._arrays, p.strain,
                                   self._strain_increment, self._gradient_increment, self.divergence)
         for material, members in zip(materials, body_slices):
             material.update(p, members, self._strain_increment, self._gradient_increment)
-        self._stress_total = kernels.internal_force(p.x, p.mass, p.density, p.stress, *self._arrays, force)
+        self._stress_total = self._internal_force(p.x, p.mass, p.density, p.stress, *self._arrays, force)
         return force
 
     def to_points(self, ctx: StepContext, dt: float) -> float:
         p = ctx.particles
-        total = kernels.g2p(p.x, p.v, p.density, ctx.acceleration, ctx.velocity, ctx.frame_velocity, dt,
-                            self.divergence, *self._arrays)
+        total = self._g2p(p.x, p.v, ctx.acceleration, self._relative, ctx.frame_velocity, dt, *self._arrays)
+        np.multiply(self.divergence, -dt, out=self.divergence)
+        p.density *= np.exp(self.divergence, out=self.divergence)
         self.matrices.invalidate()  # the points moved
         return total + self._stress_total
 
@@ -179,7 +187,7 @@ class ShapeFunctionMatrices:
         if n != self._n or not self._intact():
             self._allocate(n, n_local)
         data, nodes = self._data, self._nodes
-        outside = shape_function_data(x, *self.basis.arrays(), data[0], data[1], data[2], nodes)
+        outside = evaluate_shape_functions(self.basis, x, data[0], data[1], data[2], nodes)
         if outside >= 0:
             self.grid.locate(x)  # raises
         for matrix, own in zip(self._matrices, self._indices):

@@ -31,13 +31,13 @@ import math
 import numba
 import numpy as np
 
-from .basis import evaluate_point, scratch
+from .basis import evaluate_point, scratch, tensor_weights
 
 OUTSIDE = -1
 
 
 @numba.njit(cache=True)
-def p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
+def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
         geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity,
         grid_mass, grid_absolute, grid_volume, momentum, slots, matrix):
     """Scatter mass, relative momentum (and the mass matrix) to the grid.
@@ -80,7 +80,7 @@ def p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
 
 
 @numba.njit(cache=True)
-def linear_elastic_stress_and_force(x, velocity, v_ref, dt, mass_p, density_p, body, lame,
+def flat_linear_elastic_stress_and_force(x, relative, dt, mass_p, density_p, body, lame,
                                     geometry, n_elements, factors_x, table_x, factors_y, table_y, terms,
                                     term_weights, connectivity, strain, stress, force, divergence):
     """Eqs. 18, 6 and 11 in one pass, for bodies of :class:`LinearElastic` material.
@@ -102,8 +102,8 @@ def linear_elastic_stress_and_force(x, velocity, v_ref, dt, mass_p, density_p, b
         dvy_dy = 0.0
         for k in range(n_local):
             node = connectivity[element, k]
-            rx = velocity[node, 0] - v_ref[0]
-            ry = velocity[node, 1] - v_ref[1]
+            rx = relative[node, 0]
+            ry = relative[node, 1]
             dvx_dx += wx[k] * rx
             dvy_dx += wx[k] * ry
             dvx_dy += wy[k] * rx
@@ -137,7 +137,7 @@ def linear_elastic_stress_and_force(x, velocity, v_ref, dt, mass_p, density_p, b
 
 
 @numba.njit(cache=True)
-def velocity_gradient(x, velocity, v_ref, dt,
+def flat_velocity_gradient(x, relative, dt,
                       geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
                       connectivity, strain, strain_increment, gradient_increment, divergence):
     """Eq. 18 for any material: the strain increment (added to ``strain``) and ``dt L``."""
@@ -152,8 +152,8 @@ def velocity_gradient(x, velocity, v_ref, dt,
         dvy_dy = 0.0
         for k in range(n_local):
             node = connectivity[element, k]
-            rx = velocity[node, 0] - v_ref[0]
-            ry = velocity[node, 1] - v_ref[1]
+            rx = relative[node, 0]
+            ry = relative[node, 1]
             dvx_dx += wx[k] * rx
             dvy_dx += wx[k] * ry
             dvx_dy += wy[k] * rx
@@ -171,7 +171,7 @@ def velocity_gradient(x, velocity, v_ref, dt,
 
 
 @numba.njit(cache=True)
-def internal_force(x, mass_p, density_p, stress,
+def flat_internal_force(x, mass_p, density_p, stress,
                    geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
                    connectivity, force):
     """Eq. 11: ``f_I = -sum_p V_p sigma_p grad N_I`` with the volumes of time t."""
@@ -195,10 +195,12 @@ def internal_force(x, mass_p, density_p, stress,
 
 
 @numba.njit(cache=True)
-def g2p(x, v, density_p, acceleration, velocity, v_ref, dt, divergence,
+def flat_g2p(x, v, acceleration, relative, v_ref, dt,
         geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity):
-    """Eqs. 19-21: point velocity from the grid acceleration, position from the
-    grid velocity of the step's start, density.  Returns ``sum(v) + sum(x)``."""
+    """Eqs. 19-20: point velocity from the grid acceleration, position from the
+    grid velocity of the step's start.  Returns ``sum(v) + sum(x)``.  (The
+    density, Eq. 21, is updated by numpy's vectorized ``exp``: a scalar
+    ``exp`` per point cost more than the whole gather.)"""
     n_local = connectivity.shape[1]
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     total = 0.0
@@ -213,13 +215,12 @@ def g2p(x, v, density_p, acceleration, velocity, v_ref, dt, divergence,
             node = connectivity[element, k]
             ax += w[k] * acceleration[node, 0]
             ay += w[k] * acceleration[node, 1]
-            ux += w[k] * (velocity[node, 0] - v_ref[0])
-            uy += w[k] * (velocity[node, 1] - v_ref[1])
+            ux += w[k] * relative[node, 0]
+            uy += w[k] * relative[node, 1]
         v[p, 0] += dt * ax
         v[p, 1] += dt * ay
         x[p, 0] += dt * (ux + v_ref[0])
         x[p, 1] += dt * (uy + v_ref[1])
-        density_p[p] *= math.exp(-dt * divergence[p])
         total += v[p, 0] + v[p, 1] + x[p, 0] + x[p, 1]
     return total
 
@@ -246,3 +247,226 @@ def lumped_grid_velocity(grid_mass, grid_absolute, signed, reference_mass, momen
             velocity[i, c] = momentum[i, c] * inverse[i] + v_ref[c]
             full_momentum[i, c] = momentum[i, c] + m * v_ref[c]
     return smallest
+
+
+# -- tensor-product bases: sum factorization over the n1 x n1 nodes ----------------------------------------
+#
+# With phi_(i,j) = U_i(xi) W_j(eta), a gather sum_ij phi_ij g_ij is
+# sum_i U_i (sum_j W_j g_ij) and its x-derivative reuses the inner sums;
+# a scatter multiplies per-i factors by W_j.  ``len(marker)`` (n1) is a
+# compile-time constant, so every loop over nodes is unrolled.
+
+
+@numba.njit(cache=True)
+def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
+               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity,
+               grid_mass, grid_absolute, grid_volume, momentum, slots, matrix):
+    """:func:`flat_p2g` for tensor-product bases (``slots`` in tensor order)."""
+    n1 = len(marker)
+    grid_mass[:] = 0.0
+    momentum[:] = 0.0
+    if signed:
+        grid_absolute[:] = 0.0
+    if want_volume:
+        grid_volume[:] = 0.0
+    if assemble:
+        matrix[:] = 0.0
+    for p in range(x.shape[0]):
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
+                                                   factors_x, table_x, factors_y, table_y)
+        if element < 0:
+            return p
+        m = mass_p[p]
+        px = m * (v[p, 0] - v_ref[0])
+        py = m * (v[p, 1] - v_ref[1])
+        volume = m / density_p[p]
+        if signed:  # also |N|.T @ m_p
+            for i in range(n1):
+                m_i = fx[i] * m
+                a_i = abs(fx[i]) * m
+                px_i = fx[i] * px
+                py_i = fx[i] * py
+                for j in range(n1):
+                    node = connectivity[element, i * n1 + j]
+                    grid_mass[node] += m_i * fy[j]
+                    grid_absolute[node] += a_i * abs(fy[j])
+                    momentum[node, 0] += px_i * fy[j]
+                    momentum[node, 1] += py_i * fy[j]
+        else:
+            for i in range(n1):
+                m_i = fx[i] * m
+                px_i = fx[i] * px
+                py_i = fx[i] * py
+                for j in range(n1):
+                    node = connectivity[element, i * n1 + j]
+                    grid_mass[node] += m_i * fy[j]
+                    momentum[node, 0] += px_i * fy[j]
+                    momentum[node, 1] += py_i * fy[j]
+        if want_volume:
+            for i in range(n1):
+                v_i = fx[i] * volume
+                for j in range(n1):
+                    grid_volume[connectivity[element, i * n1 + j]] += v_i * fy[j]
+        if assemble:
+            for i in range(n1):
+                for j in range(n1):
+                    a = i * n1 + j
+                    node = connectivity[element, a]
+                    m_a = fx[i] * fy[j] * m
+                    for k in range(n1):
+                        m_ak = m_a * fx[k]
+                        for l in range(n1):
+                            matrix[node, slots[a, k * n1 + l]] += m_ak * fy[l]
+    return -1
+
+
+@numba.njit(cache=True, inline="always")
+def _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative):
+    """``dNdx @ v_rel`` and ``dNdy @ v_rel`` of one point: (dvx/dx, dvy/dx, dvx/dy, dvy/dy)."""
+    dvx_dx = 0.0
+    dvy_dx = 0.0
+    dvx_dy = 0.0
+    dvy_dy = 0.0
+    for i in range(n1):
+        ax = 0.0
+        ay = 0.0
+        bx = 0.0
+        by = 0.0
+        for j in range(n1):
+            node = connectivity[element, i * n1 + j]
+            rx = relative[node, 0]
+            ry = relative[node, 1]
+            ax += fy[j] * rx
+            ay += fy[j] * ry
+            bx += dfy[j] * rx
+            by += dfy[j] * ry
+        dvx_dx += dfx[i] * ax
+        dvy_dx += dfx[i] * ay
+        dvx_dy += fx[i] * bx
+        dvy_dy += fx[i] * by
+    return dvx_dx, dvy_dx, dvx_dy, dvy_dy
+
+
+@numba.njit(cache=True, inline="always")
+def _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, w_xx, w_yy, w_xy, force):
+    """Scatter ``-(dNdx (V s_xx, V s_xy) + dNdy (V s_xy, V s_yy))`` of one point."""
+    for i in range(n1):
+        c_xx = dfx[i] * w_xx
+        c_xy = fx[i] * w_xy
+        d_xy = dfx[i] * w_xy
+        d_yy = fx[i] * w_yy
+        for j in range(n1):
+            node = connectivity[element, i * n1 + j]
+            force[node, 0] -= fy[j] * c_xx + dfy[j] * c_xy
+            force[node, 1] -= fy[j] * d_xy + dfy[j] * d_yy
+
+
+@numba.njit(cache=True)
+def tensor_linear_elastic_stress_and_force(x, relative, dt, mass_p, density_p, body, lame,
+                                           marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                                           connectivity, strain, stress, force, divergence):
+    """:func:`flat_linear_elastic_stress_and_force` for tensor-product bases."""
+    n1 = len(marker)
+    force[:] = 0.0
+    total = 0.0
+    for p in range(x.shape[0]):
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
+                                                   factors_x, table_x, factors_y, table_y)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
+        e_xx = dt * dvx_dx
+        e_yy = dt * dvy_dy
+        e_xy = dt * (0.5 * (dvx_dy + dvy_dx))
+        strain[p, 0] += e_xx
+        strain[p, 1] += e_yy
+        strain[p, 2] += e_xy
+        lam = lame[body[p], 0]
+        two_mu = lame[body[p], 1]
+        volumetric = e_xx + e_yy
+        s_xx = stress[p, 0] + (lam * volumetric + two_mu * e_xx)
+        s_yy = stress[p, 1] + (lam * volumetric + two_mu * e_yy)
+        s_xy = stress[p, 2] + two_mu * e_xy
+        stress[p, 0] = s_xx
+        stress[p, 1] = s_yy
+        stress[p, 2] = s_xy
+        total += s_xx + s_yy + s_xy
+        divergence[p] = dvx_dx + dvy_dy
+        volume = mass_p[p] / density_p[p]
+        _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, volume * s_xx, volume * s_yy, volume * s_xy,
+                      force)
+    return total
+
+
+@numba.njit(cache=True)
+def tensor_velocity_gradient(x, relative, dt,
+                             marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity,
+                             strain, strain_increment, gradient_increment, divergence):
+    """:func:`flat_velocity_gradient` for tensor-product bases."""
+    n1 = len(marker)
+    for p in range(x.shape[0]):
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
+                                                   factors_x, table_x, factors_y, table_y)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
+        strain_increment[p, 0] = dt * dvx_dx
+        strain_increment[p, 1] = dt * dvy_dy
+        strain_increment[p, 2] = dt * (0.5 * (dvx_dy + dvy_dx))
+        for c in range(3):
+            strain[p, c] += strain_increment[p, c]
+        gradient_increment[p, 0] = dt * dvx_dx
+        gradient_increment[p, 1] = dt * dvx_dy
+        gradient_increment[p, 2] = dt * dvy_dx
+        gradient_increment[p, 3] = dt * dvy_dy
+        divergence[p] = dvx_dx + dvy_dy
+
+
+@numba.njit(cache=True)
+def tensor_internal_force(x, mass_p, density_p, stress,
+                          marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity,
+                          force):
+    """:func:`flat_internal_force` for tensor-product bases."""
+    n1 = len(marker)
+    force[:] = 0.0
+    total = 0.0
+    for p in range(x.shape[0]):
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
+                                                   factors_x, table_x, factors_y, table_y)
+        volume = mass_p[p] / density_p[p]
+        total += stress[p, 0] + stress[p, 1] + stress[p, 2]
+        _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, volume * stress[p, 0], volume * stress[p, 1],
+                      volume * stress[p, 2], force)
+    return total
+
+
+@numba.njit(cache=True)
+def tensor_g2p(x, v, acceleration, relative, v_ref, dt,
+               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity):
+    """:func:`flat_g2p` for tensor-product bases."""
+    n1 = len(marker)
+    total = 0.0
+    for p in range(x.shape[0]):
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
+                                                   factors_x, table_x, factors_y, table_y)
+        ax = 0.0
+        ay = 0.0
+        ux = 0.0
+        uy = 0.0
+        for i in range(n1):
+            sax = 0.0
+            say = 0.0
+            sux = 0.0
+            suy = 0.0
+            for j in range(n1):
+                node = connectivity[element, i * n1 + j]
+                sax += fy[j] * acceleration[node, 0]
+                say += fy[j] * acceleration[node, 1]
+                sux += fy[j] * relative[node, 0]
+                suy += fy[j] * relative[node, 1]
+            ax += fx[i] * sax
+            ay += fx[i] * say
+            ux += fx[i] * sux
+            uy += fx[i] * suy
+        v[p, 0] += dt * ax
+        v[p, 1] += dt * ay
+        x[p, 0] += dt * (ux + v_ref[0])
+        x[p, 1] += dt * (uy + v_ref[1])
+        total += v[p, 0] + v[p, 1] + x[p, 0] + x[p, 1]
+    return total

@@ -1,0 +1,218 @@
+"""Cost of the explicit step: ns per particle-step, fixed cost, memory, compile time, paper runs.
+
+Run: ``python benchmarks/step.py`` (about 5 minutes; ``--quick`` skips 1e5
+particles and the paper runs; ``--engine scipy`` times the reference).
+
+Each case is a square block of linear elastic material (E = 1e4 Pa,
+nu = 0.3, rho = 1e3 kg/m^3) with 2 x 2 points per cell and the initial
+velocity ``0.01 cos(pi x / L)`` (the vibrating bar's mode), in a grid two
+cells wider on every side, with no declared effects; ``dt`` is a tenth of a
+cell's wave transit time.  Steps are timed after two warm-up steps (which
+also compile or load the kernels); the table reports the median time per
+step over the particles.  Targets of the issue at 1e5 particles with lumped
+mass: q1 <= 40 ns, bspline3 <= 120 ns, q2 and serendipity <= 80 ns;
+consistent mass <= 5x lumped; fixed cost <= 20 us per step; <= 1 KB per
+particle.
+
+* fixed cost: time per step of a 16-point block (2 x 2 cells), lumped mass.
+* memory: peak of Python-tracked allocations (tracemalloc: numpy arrays,
+  scipy matrices) while building the simulation and running two steps at
+  1e5 particles, divided by the number of particles.
+* compile time: the same tiny runs of every basis and mass kind in a fresh
+  process with an empty numba cache (``NUMBA_CACHE_DIR``), minus the same in
+  a fresh process with the cache filled.
+* paper runs: the paper's cases (``vibrating_bar``, ``cantilever`` and
+  ``box_impact`` where the scene exists) for q1, q2, serendipity and
+  bspline3 with their scene files' settings (``negative_mass = "warn"`` so
+  that q2 and serendipity run to the end), the total wall time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import tracemalloc
+import warnings
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from pathlib import Path  # noqa: E402
+
+import femgrid_mpm.scene as scene_module  # noqa: E402
+from femgrid_mpm.diagnostics import SimulationStopped  # noqa: E402
+from femgrid_mpm.scene import Scene, bundled_scene  # noqa: E402
+from femgrid_mpm.solver import Simulation  # noqa: E402
+
+BASES = ("q1", "q2", "serendipity", "bspline3")
+MASSES = ("lumped", "consistent")
+SIZES = (1_000, 10_000, 100_000)
+PAPER_CASES = ("vibrating_bar", "cantilever", "box_impact")
+TARGET_LUMPED = {"q1": 40, "q2": 80, "serendipity": 80, "bspline3": 120}
+
+
+def block_scene(basis: str, mass: str, n_points: int, engine: str = "numba") -> Scene:
+    """A square block of about ``n_points`` points (2 x 2 per unit cell)."""
+    side = max(1, int(round(np.sqrt(n_points / 4))))
+    wave_speed = np.sqrt(1e4 * 0.7 / (1.3 * 0.4) / 1e3)  # plane strain p-wave, E = 1e4, nu = 0.3
+    return Scene.model_validate({
+        "grid": {"basis": basis, "lower": [0, 0], "upper": [side + 4, side + 4], "spacing": 1.0},
+        "time": {"dt": 0.1 / wave_speed, "end": 1e6},
+        "solver": {"mass": mass, "negative_mass": "warn", "consistent_fallback": "blend", "engine": engine},
+        "bodies": [{
+            "name": "block", "lower": [2, 2], "upper": [side + 2, side + 2], "points_per_cell": 2,
+            "velocity": [f"0.01*cos(pi*(x-2)/{side})", "0"],
+            "material": {"E": 1e4, "nu": 0.3, "density": 1e3},
+        }],
+    })
+
+
+def seconds_per_step(simulation: Simulation, budget: float, min_steps: int = 3, max_steps: int = 20000) -> float:
+    simulation.advance()
+    simulation.advance()  # warm-up: kernels compiled or loaded, buffers allocated, CG history
+    samples = []
+    start = time.perf_counter()
+    while len(samples) < max_steps and (len(samples) < min_steps or time.perf_counter() - start < budget):
+        tick = time.perf_counter()
+        simulation.advance()
+        samples.append(time.perf_counter() - tick)
+    return float(np.median(samples))
+
+
+def per_particle_table(engine: str, sizes, budget: float) -> dict:
+    results = {}
+    for basis in BASES:
+        for mass in MASSES:
+            for n in sizes:
+                simulation = Simulation(block_scene(basis, mass, n, engine))
+                seconds = seconds_per_step(simulation, budget)
+                results[basis, mass, n] = 1e9 * seconds / simulation.particles.n
+                print(f"  {basis:12s} {mass:10s} {n:>7d}: {results[basis, mass, n]:8.1f} ns per particle-step",
+                      file=sys.stderr, flush=True)
+    return results
+
+
+def fixed_costs(engine: str) -> dict:
+    return {basis: 1e6 * seconds_per_step(Simulation(block_scene(basis, "lumped", 16, engine)), 1.0, 200)
+            for basis in BASES}
+
+
+def memory_per_particle(engine: str, n: int) -> dict:
+    results = {}
+    for basis in BASES:
+        for mass in MASSES:
+            tracemalloc.start()
+            simulation = Simulation(block_scene(basis, mass, n, engine))
+            simulation.advance()
+            simulation.advance()
+            _, peak = tracemalloc.get_traced_memory()
+            tracemalloc.stop()
+            results[basis, mass] = peak / simulation.particles.n
+            del simulation
+    return results
+
+
+TINY_RUNS = """
+import warnings, time
+warnings.simplefilter("ignore")
+start = time.perf_counter()
+import sys; sys.path.insert(0, {benchmarks!r})
+from step import block_scene
+from femgrid_mpm.solver import Simulation
+for basis in {bases!r}:
+    for mass in {masses!r}:
+        simulation = Simulation(block_scene(basis, mass, 64))
+        simulation.advance()
+        simulation.advance()
+print(time.perf_counter() - start)
+"""
+
+
+def compile_time() -> tuple[float, float]:
+    """(first run with an empty numba cache, second run with the cache filled), in s."""
+    code = TINY_RUNS.format(benchmarks=os.path.dirname(os.path.abspath(__file__)), bases=BASES, masses=MASSES)
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        times = [float(subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True,
+                                      text=True).stdout.split()[-1]) for _ in range(2)]
+    return times[0], times[1]
+
+
+def paper_runs(engine: str) -> tuple[float, list]:
+    rows = []
+    total = 0.0
+    for case in PAPER_CASES:
+        if not (Path(scene_module.__file__).parent / "scenes" / f"{case}.toml").exists():
+            continue
+        scene = bundled_scene(case)
+        for basis in BASES:
+            overrides = {"grid.basis": basis, "solver.negative_mass": "warn", "solver.engine": engine}
+            simulation = Simulation(scene.with_overrides(**overrides))
+            start = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                try:
+                    result = simulation.run()
+                    status = result.status
+                except SimulationStopped as stop:
+                    status = f"stopped ({stop.reason})"
+            seconds = time.perf_counter() - start
+            total += seconds
+            rows.append((case, basis, simulation.particles.n, simulation.step_index, seconds, status))
+            print(f"  {case} {basis}: {seconds:.2f} s, {simulation.step_index} steps, {status}", file=sys.stderr,
+                  flush=True)
+    return total, rows
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--engine", default="numba", choices=["numba", "scipy"])
+    parser.add_argument("--quick", action="store_true", help="1e3 and 1e4 particles only, no paper runs")
+    parser.add_argument("--budget", type=float, default=1.0, help="seconds of timed steps per case (default 1)")
+    args = parser.parse_args(argv)
+    sizes = SIZES[:2] if args.quick else SIZES
+    warnings.simplefilter("ignore")
+
+    print(f"engine: {args.engine}; {time.strftime('%Y-%m-%d')}; numpy {np.__version__}\n")
+    table = per_particle_table(args.engine, sizes, args.budget)
+    print("ns per particle-step (median over steps):\n")
+    print("| basis | mass | " + " | ".join(f"{n:.0e}" for n in sizes) + " | consistent / lumped | target at 1e5 |")
+    print("|---|---|" + "---|" * (len(sizes) + 2))
+    for basis in BASES:
+        for mass in MASSES:
+            cells = " | ".join(f"{table[basis, mass, n]:.0f}" for n in sizes)
+            ratio = table[basis, "consistent", sizes[-1]] / table[basis, "lumped", sizes[-1]]
+            target = f"<= {TARGET_LUMPED[basis]} ns" if mass == "lumped" else "<= 5x lumped"
+            print(f"| {basis} | {mass} | {cells} | {ratio:.1f}x | {target} |" if mass == "consistent"
+                  else f"| {basis} | {mass} | {cells} | | {target} |")
+
+    costs = fixed_costs(args.engine)
+    print("\nfixed cost per step (16 points, lumped; target <= 20 us): "
+          + ", ".join(f"{basis} {cost:.1f} us" for basis, cost in costs.items()))
+
+    memory = memory_per_particle(args.engine, sizes[-1])
+    print(f"\npeak traced memory per particle at {sizes[-1]:.0e} particles (target <= 1 KB): "
+          + ", ".join(f"{basis} {mass} {value:.0f} B" for (basis, mass), value in memory.items()))
+
+    if args.engine == "numba":
+        first, second = compile_time()
+        print(f"\ntiny runs of every basis and mass kind in a fresh process: {first:.1f} s with an empty numba cache, "
+              f"{second:.1f} s with it filled (compile time {first - second:.1f} s, paid once)")
+
+    if not args.quick:
+        total, rows = paper_runs(args.engine)
+        print(f"\nthe paper's runs ({len(rows)}; target: 12 runs in under 30 s):\n")
+        print("| case | basis | points | steps | wall (s) | status |")
+        print("|---|---|---|---|---|---|")
+        for case, basis, points, steps, seconds, status in rows:
+            print(f"| {case} | {basis} | {points} | {steps} | {seconds:.2f} | {status} |")
+        print(f"| total | | | | {total:.1f} | |")
+
+
+if __name__ == "__main__":
+    main()
