@@ -190,8 +190,10 @@ class Simulation:
         except ValueError as error:
             raise self._stop(f"a particle left the grid: {error}", "particle_left_grid") from None
         self.negative_mass.check(self.mass.lumped, ctx.step, ctx.time, self.grid.nodes)
-        ctx.momentum = relative_momentum + self.mass.lumped[:, None] * ctx.frame_velocity
-        ctx.velocity = self._solve(relative_momentum, "velocity") + ctx.frame_velocity
+        try:  # Eq. 17: v = M^-1 p_rel + v_ref, and the momentum p_rel + m v_ref
+            ctx.momentum, ctx.velocity = self.mass.grid_velocity(relative_momentum, ctx.frame_velocity)
+        except SingularMassError as error:
+            raise self._stop(str(error), "singular_mass") from None
         self._constrain(ctx.velocity)
         return ctx
 

@@ -94,6 +94,7 @@ class CompiledTransfer:
         self.grid_absolute = np.zeros(n_nodes if self.signed else 1)
         self.grid_volume = np.zeros(1)
         self.divergence = np.zeros(n)
+        self._relative = np.zeros((n_nodes, 2))
         self._strain_increment = self._gradient_increment = None
         self._stress_total = 0.0
         self.stencil = None
@@ -134,17 +135,16 @@ class CompiledTransfer:
     def internal_force(self, ctx: StepContext, dt: float, materials, body_slices) -> np.ndarray:
         p = ctx.particles
         force = np.empty((self.grid.n_nodes, 2))
-        self._relative = ctx.velocity - ctx.frame_velocity  # after the constraints, as the reference
         if self._lame is not None:
             self._stress_total = self._stress_and_force(
-                p.x, self._relative, dt, p.mass, p.density, p.body, self._lame,
+                p.x, ctx.velocity, ctx.frame_velocity, self._relative, dt, p.mass, p.density, p.body, self._lame,
                 *self._arrays, p.strain, p.stress, force, self.divergence,
             )
             return force
         if self._strain_increment is None:
             self._strain_increment = np.empty((p.n, 3))
             self._gradient_increment = np.empty((p.n, 4))
-        self._velocity_gradient(p.x, self._relative, dt, *self._arrays, p.strain,
+        self._velocity_gradient(p.x, ctx.velocity, ctx.frame_velocity, self._relative, dt, *self._arrays, p.strain,
                                   self._strain_increment, self._gradient_increment, self.divergence)
         for material, members in zip(materials, body_slices):
             material.update(p, members, self._strain_increment, self._gradient_increment)
@@ -153,9 +153,8 @@ class CompiledTransfer:
 
     def to_points(self, ctx: StepContext, dt: float) -> float:
         p = ctx.particles
-        total = self._g2p(p.x, p.v, ctx.acceleration, self._relative, ctx.frame_velocity, dt, *self._arrays)
-        np.multiply(self.divergence, -dt, out=self.divergence)
-        p.density *= np.exp(self.divergence, out=self.divergence)
+        total = self._g2p(p.x, p.v, p.density, ctx.acceleration, self._relative, ctx.frame_velocity, dt,
+                          self.divergence, *self._arrays)
         self.matrices.invalidate()  # the points moved
         return total + self._stress_total
 

@@ -36,6 +36,14 @@ from .basis import evaluate_point, scratch, tensor_weights
 OUTSIDE = -1
 
 
+@numba.njit(cache=True, inline="always")
+def _relative_velocity(velocity, v_ref, relative):
+    """``v_I - v_ref``: the grid velocity in the step's frame (after the constraints)."""
+    for i in range(velocity.shape[0]):
+        relative[i, 0] = velocity[i, 0] - v_ref[0]
+        relative[i, 1] = velocity[i, 1] - v_ref[1]
+
+
 @numba.njit(cache=True)
 def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
         geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity,
@@ -80,7 +88,7 @@ def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
 
 
 @numba.njit(cache=True)
-def flat_linear_elastic_stress_and_force(x, relative, dt, mass_p, density_p, body, lame,
+def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                                     geometry, n_elements, factors_x, table_x, factors_y, table_y, terms,
                                     term_weights, connectivity, strain, stress, force, divergence):
     """Eqs. 18, 6 and 11 in one pass, for bodies of :class:`LinearElastic` material.
@@ -88,6 +96,7 @@ def flat_linear_elastic_stress_and_force(x, relative, dt, mass_p, density_p, bod
     ``lame[b] = (lambda, 2 mu)`` of body b.  Returns the sum of the new
     stresses (for the finiteness check).
     """
+    _relative_velocity(velocity, v_ref, relative)
     n_local = connectivity.shape[1]
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     force[:] = 0.0
@@ -137,10 +146,11 @@ def flat_linear_elastic_stress_and_force(x, relative, dt, mass_p, density_p, bod
 
 
 @numba.njit(cache=True)
-def flat_velocity_gradient(x, relative, dt,
+def flat_velocity_gradient(x, velocity, v_ref, relative, dt,
                       geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
                       connectivity, strain, strain_increment, gradient_increment, divergence):
     """Eq. 18 for any material: the strain increment (added to ``strain``) and ``dt L``."""
+    _relative_velocity(velocity, v_ref, relative)
     n_local = connectivity.shape[1]
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     for p in range(x.shape[0]):
@@ -195,12 +205,10 @@ def flat_internal_force(x, mass_p, density_p, stress,
 
 
 @numba.njit(cache=True)
-def flat_g2p(x, v, acceleration, relative, v_ref, dt,
+def flat_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
         geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity):
-    """Eqs. 19-20: point velocity from the grid acceleration, position from the
-    grid velocity of the step's start.  Returns ``sum(v) + sum(x)``.  (The
-    density, Eq. 21, is updated by numpy's vectorized ``exp``: a scalar
-    ``exp`` per point cost more than the whole gather.)"""
+    """Eqs. 19-21: point velocity from the grid acceleration, position from the
+    grid velocity of the step's start, density.  Returns ``sum(v) + sum(x)``."""
     n_local = connectivity.shape[1]
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     total = 0.0
@@ -221,6 +229,7 @@ def flat_g2p(x, v, acceleration, relative, v_ref, dt,
         v[p, 1] += dt * ay
         x[p, 0] += dt * (ux + v_ref[0])
         x[p, 1] += dt * (uy + v_ref[1])
+        density_p[p] *= math.exp(-dt * divergence[p])
         total += v[p, 0] + v[p, 1] + x[p, 0] + x[p, 1]
     return total
 
@@ -362,10 +371,11 @@ def _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, w_xx, w_yy, w_xy,
 
 
 @numba.njit(cache=True)
-def tensor_linear_elastic_stress_and_force(x, relative, dt, mass_p, density_p, body, lame,
+def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                                            marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
                                            connectivity, strain, stress, force, divergence):
     """:func:`flat_linear_elastic_stress_and_force` for tensor-product bases."""
+    _relative_velocity(velocity, v_ref, relative)
     n1 = len(marker)
     force[:] = 0.0
     total = 0.0
@@ -397,10 +407,11 @@ def tensor_linear_elastic_stress_and_force(x, relative, dt, mass_p, density_p, b
 
 
 @numba.njit(cache=True)
-def tensor_velocity_gradient(x, relative, dt,
+def tensor_velocity_gradient(x, velocity, v_ref, relative, dt,
                              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity,
                              strain, strain_increment, gradient_increment, divergence):
     """:func:`flat_velocity_gradient` for tensor-product bases."""
+    _relative_velocity(velocity, v_ref, relative)
     n1 = len(marker)
     for p in range(x.shape[0]):
         element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
@@ -437,7 +448,7 @@ def tensor_internal_force(x, mass_p, density_p, stress,
 
 
 @numba.njit(cache=True)
-def tensor_g2p(x, v, acceleration, relative, v_ref, dt,
+def tensor_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity):
     """:func:`flat_g2p` for tensor-product bases."""
     n1 = len(marker)
@@ -468,5 +479,6 @@ def tensor_g2p(x, v, acceleration, relative, v_ref, dt,
         v[p, 1] += dt * ay
         x[p, 0] += dt * (ux + v_ref[0])
         x[p, 1] += dt * (uy + v_ref[1])
+        density_p[p] *= math.exp(-dt * divergence[p])
         total += v[p, 0] + v[p, 1] + x[p, 0] + x[p, 1]
     return total
