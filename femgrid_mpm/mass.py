@@ -155,13 +155,28 @@ class ConsistentMass:
         weighted = N.multiply(m_p[:, None]).tocsr()
         matrix = (N.T @ weighted).tocsr()
         self.lumped = N.T @ m_p
-        self.active = matrix.diagonal() > 1e-24 * self.reference_mass
-        if self.nonnegative and volume_p is not None:
-            fraction = np.divide(N.T @ volume_p, self.node_integrals, out=np.ones(self.n_nodes), where=self.active)
+        self._prepare(matrix, None if volume_p is None else N.T @ volume_p)
+
+    def assemble_pattern(self, pattern, lumped: np.ndarray, node_volume: np.ndarray) -> None:
+        """The same from the compiled P2G, which added ``m_p N_a N_b`` into ``pattern``
+        (:class:`femgrid_mpm.kernels.pattern.MassPattern`, a structure fixed per
+        grid with every diagonal entry), ``N.T @ m_p`` and ``N.T @ V_p``.  The
+        weak-node lumping and the systems keep that structure (no SpGEMM)."""
+        self.lumped = lumped
+        self._prepare(_CompiledCSR(pattern.matrix()), node_volume, pattern.diagonal)
+
+    def _prepare(self, matrix: sp.csr_matrix, node_volume: np.ndarray | None, diagonal_index=None) -> None:
+        diagonal = matrix.diagonal() if diagonal_index is None else matrix.data[diagonal_index]
+        self.active = diagonal > 1e-24 * self.reference_mass
+        if self.nonnegative and node_volume is not None:
+            fraction = np.divide(node_volume, self.node_integrals, out=np.ones(self.n_nodes), where=self.active)
             weak = self.active & (fraction < self.weak_fraction)
             self.weak_nodes = int(weak.sum())
             if self.weak_nodes:
-                matrix = _lump_couplings(matrix, weak)
+                if diagonal_index is None:
+                    matrix = _lump_couplings(matrix, weak)
+                else:  # in place, keeping the structure
+                    _lump_couplings_in_place(matrix.indptr, matrix.indices, matrix.data, diagonal_index, weak)
         self.matrix = matrix
         # empty and fixed degrees of freedom leave the system (identity rows);
         # one system for both components when they are fixed alike
@@ -171,7 +186,8 @@ class ConsistentMass:
         self._direct = self.linear_solver == "direct" or (
             self.linear_solver == "auto" and np.count_nonzero(self.active) <= DIRECT_LIMIT
         )
-        self._systems = [_System.build(matrix, list(columns), excluded[:, columns[0]], self._direct) for columns in groups]
+        self._systems = [_System.build(matrix, list(columns), excluded[:, columns[0]], self._direct, diagonal_index)
+                         for columns in groups]
 
     def grid_velocity(self, relative_momentum: np.ndarray, frame_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 17 in the frame moving with ``frame_velocity``: ``(p, v)``, the momentum
@@ -266,10 +282,17 @@ class _System:
     blended: bool = False
 
     @classmethod
-    def build(cls, matrix: sp.csr_matrix, columns: list, excluded: np.ndarray, direct: bool) -> "_System":
-        keep = sp.diags((~excluded).astype(float))
-        reduced = (keep @ matrix @ keep + sp.diags(excluded.astype(float))).tocsr()
-        return cls(columns, excluded, reduced, 1.0 / reduced.diagonal(), _factor(reduced) if direct else None)
+    def build(cls, matrix: sp.csr_matrix, columns: list, excluded: np.ndarray, direct: bool,
+              diagonal_index: np.ndarray | None = None) -> "_System":
+        if diagonal_index is None:
+            keep = sp.diags((~excluded).astype(float))
+            reduced = (keep @ matrix @ keep + sp.diags(excluded.astype(float))).tocsr()
+            inverse_diagonal = 1.0 / reduced.diagonal()
+        else:  # the same on a structure with every diagonal entry: zero rows and columns, unit diagonal
+            data = _exclude_in_place(matrix.indptr, matrix.indices, matrix.data.copy(), diagonal_index, excluded)
+            reduced = _CompiledCSR((data, matrix.indices.copy(), matrix.indptr.copy()), shape=matrix.shape)
+            inverse_diagonal = 1.0 / data[diagonal_index]
+        return cls(columns, excluded, reduced, inverse_diagonal, _factor(reduced) if direct else None)
 
     def blend_with(self, target: np.ndarray, weight: float, direct: bool) -> None:
         """The fallback: ``(1 - weight) M + weight diag(target)`` on the kept rows."""
@@ -354,6 +377,122 @@ def _lumped_velocity(relative_momentum, inverse, lumped, frame_velocity, momentu
             velocity[i, c] = relative_momentum[i, c] * inverse[i] + frame_velocity[c]
 
 
+@numba.njit(cache=True)
+def _lump_couplings_in_place(indptr, indices, data, diagonal_index, weak):
+    """:func:`_lump_couplings` keeping the structure (moved entries become explicit zeros)."""
+    for i in range(len(indptr) - 1):
+        for entry in range(indptr[i], indptr[i + 1]):
+            j = indices[entry]
+            if j != i and (weak[i] or weak[j]):
+                data[diagonal_index[i]] += data[entry]
+                data[entry] = 0.0
+
+
+@numba.njit(cache=True)
+def _exclude_in_place(indptr, indices, data, diagonal_index, excluded):
+    """``keep M keep + diag(excluded)`` on a structure with every diagonal entry."""
+    for i in range(len(indptr) - 1):
+        for entry in range(indptr[i], indptr[i + 1]):
+            if excluded[i] or excluded[indices[entry]]:
+                data[entry] = 0.0
+        if excluded[i]:
+            data[diagonal_index[i]] = 1.0
+    return data
+
+
+@numba.njit(cache=True)
+def _csr_times_dense(indptr, indices, data, x, out):
+    """``out = A @ x`` for x of shape (n, 1) or (n, 2)."""
+    two = x.shape[1] == 2
+    for i in range(len(indptr) - 1):
+        first = 0.0
+        second = 0.0
+        for entry in range(indptr[i], indptr[i + 1]):
+            j = indices[entry]
+            first += data[entry] * x[j, 0]
+            if two:
+                second += data[entry] * x[j, 1]
+        out[i, 0] = first
+        if two:
+            out[i, 1] = second
+    return out
+
+
+@numba.njit(cache=True)
+def _compiled_cg(indptr, indices, data, b, x0, inverse_diagonal, rtol, max_iterations):
+    """:func:`_preconditioned_cg` compiled, for one or two columns (the same steps)."""
+    n, k = b.shape
+    x = x0.copy()
+    r = np.empty_like(b)
+    _csr_times_dense(indptr, indices, data, x, r)
+    for i in range(n):
+        for c in range(k):
+            r[i, c] = b[i, c] - r[i, c]
+    z = np.empty_like(b)
+    p = np.empty_like(b)
+    Ap = np.empty_like(b)
+    target = np.zeros(k)
+    rz = np.zeros(k)
+    for c in range(k):
+        norm = 0.0
+        for i in range(n):
+            norm += b[i, c] * b[i, c]
+        target[c] = rtol * np.sqrt(norm)
+    for i in range(n):
+        for c in range(k):
+            z[i, c] = inverse_diagonal[i] * r[i, c]
+            p[i, c] = z[i, c]
+            rz[c] += r[i, c] * z[i, c]
+    for iteration in range(max_iterations + 1):
+        done = True
+        any_rz = False
+        for c in range(k):
+            norm = 0.0
+            for i in range(n):
+                norm += r[i, c] * r[i, c]
+            if np.sqrt(norm) > target[c]:
+                done = False
+            if rz[c] != 0.0:
+                any_rz = True
+        if done or not any_rz:
+            return x, True, iteration
+        if iteration == max_iterations:
+            break
+        _csr_times_dense(indptr, indices, data, p, Ap)
+        alpha = np.zeros(k)
+        for c in range(k):
+            curvature = 0.0
+            for i in range(n):
+                curvature += p[i, c] * Ap[i, c]
+            if curvature <= 0.0 and rz[c] != 0.0:
+                return x, False, iteration
+            alpha[c] = rz[c] / curvature if curvature > 0.0 else 0.0
+        rz_new = np.zeros(k)
+        for i in range(n):
+            for c in range(k):
+                x[i, c] += alpha[c] * p[i, c]
+                r[i, c] -= alpha[c] * Ap[i, c]
+                z[i, c] = inverse_diagonal[i] * r[i, c]
+                rz_new[c] += r[i, c] * z[i, c]
+        for c in range(k):
+            beta = rz_new[c] / rz[c] if rz[c] != 0.0 else 0.0
+            for i in range(n):
+                p[i, c] = z[i, c] + beta * p[i, c]
+            rz[c] = rz_new[c]
+    return x, False, max_iterations
+
+
+class _CompiledCSR(sp.csr_matrix):
+    """A CSR matrix whose product with a dense (n, k) array is a compiled loop
+    (scipy's ``csr_matvecs`` took ~3 ns per stored entry with two columns)."""
+
+    def __matmul__(self, other):
+        if isinstance(other, np.ndarray) and other.ndim == 2 and other.dtype == np.float64:
+            out = np.empty((self.shape[0], other.shape[1]))
+            return _csr_times_dense(self.indptr, self.indices, self.data, np.ascontiguousarray(other), out)
+        return super().__matmul__(other)
+
+
 def _lump_couplings(matrix: sp.csr_matrix, weak: np.ndarray) -> sp.csr_matrix:
     """Move every off-diagonal entry that touches a weak node onto both diagonals."""
     coo = matrix.tocoo()
@@ -373,6 +512,9 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations):
     (singular matrix met by an inconsistent right-hand side) stops the
     iteration as not converged.
     """
+    if isinstance(A, _CompiledCSR):
+        return _compiled_cg(A.indptr, A.indices, A.data, np.ascontiguousarray(b, dtype=float),
+                            np.ascontiguousarray(x0, dtype=float), inverse_diagonal, rtol, max_iterations)
     x = x0.copy()
     target = rtol * np.linalg.norm(b, axis=0)
     r = b - A @ x

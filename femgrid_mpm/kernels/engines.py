@@ -28,6 +28,7 @@ from ..effects.base import StepContext
 from ..materials import LinearElastic
 from . import transfer as kernels
 from .basis import evaluate_shape_functions, separated_tables
+from .pattern import mass_pattern
 
 
 class ScipyTransfer:
@@ -97,9 +98,13 @@ class CompiledTransfer:
         self._relative = np.zeros((n_nodes, 2))
         self._strain_increment = self._gradient_increment = None
         self._stress_total = 0.0
-        self.stencil = None
-        self._no_slots = np.zeros((1, 1), dtype=np.int32)
-        self._no_matrix = np.zeros((1, 1))
+        # consistent mass: assembled in the P2G pass into a pattern fixed per grid
+        self.pattern = None
+        self._no_pattern = (np.zeros(2, np.int32), np.zeros((1, 1), np.int32), np.zeros((1, 1), np.int32), np.zeros(1))
+        if hasattr(simulation.mass, "assemble_pattern"):
+            connectivity = self.basis.tensor.connectivity if family == "tensor" else self.basis.connectivity
+            self.pattern = mass_pattern(grid, connectivity)
+            self.grid_volume = np.zeros(n_nodes)
         self._lame = None
         materials = simulation.materials
         if all(type(material) is LinearElastic for material in materials):
@@ -112,22 +117,19 @@ class CompiledTransfer:
         p = ctx.particles
         self.matrices.invalidate()
         momentum = np.empty((self.grid.n_nodes, 2))
-        stencil = getattr(mass, "stencil", None)
-        want_volume = bool(getattr(mass, "wants_volume", False))
-        if want_volume and len(self.grid_volume) != self.grid.n_nodes:
-            self.grid_volume = np.zeros(self.grid.n_nodes)
+        pattern = self.pattern
         outside = self._p2g(
-            p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, want_volume, stencil is not None,
+            p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, pattern is not None, pattern is not None,
             *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum,
-            self._no_slots if stencil is None else stencil.slots,
-            self._no_matrix if stencil is None else stencil.values,
+            *(self._no_pattern if pattern is None else (pattern.indptr, pattern.rank, pattern.slots, pattern.data)),
         )
         if outside >= 0:
             self.grid.locate(p.x)  # raises the ValueError naming the points outside
             raise AssertionError(f"point {outside} is outside the grid")  # pragma: no cover
-        if hasattr(mass, "assemble_sums"):
-            mass.assemble_sums(self.grid_mass, self.grid_absolute if self.signed else None,
-                               self.grid_volume if want_volume else None)
+        if pattern is not None:  # consistent: M assembled into the pattern
+            mass.assemble_pattern(pattern, self.grid_mass, self.grid_volume)
+        elif hasattr(mass, "assemble_sums"):
+            mass.assemble_sums(self.grid_mass, self.grid_absolute if self.signed else None)
         else:  # a mass model that needs the matrices
             mass.assemble(ctx.N, p.mass, p.volume)
         return momentum

@@ -47,8 +47,9 @@ def _relative_velocity(velocity, v_ref, relative):
 @numba.njit(cache=True)
 def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
         geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity,
-        grid_mass, grid_absolute, grid_volume, momentum, slots, matrix):
-    """Scatter mass, relative momentum (and the mass matrix) to the grid.
+        grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, slots, matrix):
+    """Scatter mass, relative momentum (and the mass matrix, into the fixed
+    pattern of :mod:`.pattern`) to the grid.
 
     Returns the first point outside the grid, or -1.
     """
@@ -82,8 +83,9 @@ def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
                 grid_volume[node] += w[k] * volume
             if assemble:
                 weighted = w[k] * m
+                start = indptr[node]
                 for j in range(n_local):
-                    matrix[node, slots[k, j]] += weighted * w[j]
+                    matrix[start + rank[node, slots[k, j]]] += weighted * w[j]
     return -1
 
 
@@ -269,7 +271,7 @@ def lumped_grid_velocity(grid_mass, grid_absolute, signed, reference_mass, momen
 @numba.njit(cache=True)
 def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity,
-               grid_mass, grid_absolute, grid_volume, momentum, slots, matrix):
+               grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, slots, matrix):
     """:func:`flat_p2g` for tensor-product bases (``slots`` in tensor order)."""
     n1 = len(marker)
     grid_mass[:] = 0.0
@@ -321,11 +323,12 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
                 for j in range(n1):
                     a = i * n1 + j
                     node = connectivity[element, a]
+                    start = indptr[node]
                     m_a = fx[i] * fy[j] * m
                     for k in range(n1):
                         m_ak = m_a * fx[k]
                         for l in range(n1):
-                            matrix[node, slots[a, k * n1 + l]] += m_ak * fy[l]
+                            matrix[start + rank[node, slots[a, k * n1 + l]]] += m_ak * fy[l]
     return -1
 
 
