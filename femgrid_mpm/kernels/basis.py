@@ -34,23 +34,27 @@ class BasisTables:
 
     Attributes
     ----------
+    marker : tuple
+        ``n1`` zeros, ``n1`` the number of 1D factors per direction (see
+        :class:`TensorTables`).
     geometry : ndarray, shape (5,)
         ``lower_x, lower_y, upper_x, upper_y, 1 / element_width``.
     n_elements : ndarray of int64, shape (2,)
-    factors_x, factors_y : ndarray, shape (n_tables, n_factors, degree + 1)
-        Coefficients (increasing powers) of the 1D factors along x and y;
-        one table per cell column (row) for bases whose pieces differ from
-        cell to cell (open-knot splines), else a single table.
+    factors_x, factors_y : ndarray, shape (n_tables, n1, n1)
+        Coefficients (increasing powers) of the 1D factors along x and y
+        (Lagrange polynomials, or the splines' own pieces); one table per
+        cell column (row) for bases whose pieces differ from cell to cell
+        (open-knot splines), else a single table.
     table_x, table_y : ndarray of int32, shape (n_elements_x,), (n_elements_y,)
         Which table each cell column (row) uses.
-    terms : ndarray of int32, shape (n_terms, 3)
-        ``(k, i, j)``: local function k gains ``c * U_i(xi) * W_j(eta)``,
-    term_weights : ndarray, shape (n_terms,)
-        with ``c`` from here.
+    terms, term_weights : ndarray of int32 and of float, shape (n_local, width)
+        Local function k is ``sum_t term_weights[k, t] * q_(terms[k, t])``
+        with ``q_(i n1 + j) = U_i(xi) W_j(eta)``.
     connectivity : ndarray of int32, shape (n_elements, n_local)
         Global node of each local function, element ``ix * n_elements_y + iy``.
     """
 
+    marker: tuple
     geometry: np.ndarray
     n_elements: np.ndarray
     factors_x: np.ndarray
@@ -68,8 +72,8 @@ class BasisTables:
 
     def arrays(self) -> tuple:
         """The arrays of the flat (any basis) kernels, in the order they take them."""
-        return (self.geometry, self.n_elements, self.factors_x, self.table_x, self.factors_y, self.table_y,
-                self.terms, self.term_weights, self.connectivity)
+        return (self.marker, self.geometry, self.n_elements, self.factors_x, self.table_x, self.factors_y,
+                self.table_y, self.terms, self.term_weights, self.connectivity)
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,9 @@ def separated_tables(grid) -> BasisTables:
     """The separated form of ``grid``'s basis (see the module docstring)."""
     d = grid.discretization
     local = d.local_basis
+    geometry = np.array([*grid.lower, *grid.upper, 1.0 / d.element_width])
+    n_elements = np.array(d.n_elements, dtype=np.int64)
+    connectivity = np.ascontiguousarray(d.connectivity, dtype=np.int32)
     if isinstance(local, TensorSplines):
         # per-cell tables (cell, power, function); function k = 4 a + b is X_a(xi) Y_b(eta)
         factors_x = np.ascontiguousarray(np.swapaxes(local.tables[0], 1, 2))
@@ -110,6 +117,8 @@ def separated_tables(grid) -> BasisTables:
         table_y = np.arange(d.n_elements[1], dtype=np.int32)
         terms = np.array([(4 * a + b, a, b) for a in range(4) for b in range(4)], dtype=np.int32)
         weights = np.ones(len(terms))
+        # flat form: the tensor products themselves
+        flat = (factors_x, factors_y, np.arange(16, dtype=np.int32)[:, None], np.ones((16, 1)))
     elif isinstance(local, LocalPolynomials):
         us, ws, separated = _skeleton_terms(local)
         factors_x, factors_y = np.array(us)[None], np.array(ws)[None]
@@ -117,18 +126,43 @@ def separated_tables(grid) -> BasisTables:
         table_y = np.zeros(d.n_elements[1], dtype=np.int32)
         terms = np.array([term[:3] for term in separated], dtype=np.int32)
         weights = np.array([term[3] for term in separated])
+        flat = _lagrange_expansion(local)
     else:  # pragma: no cover - a new kind of local basis needs its separated form here
         raise TypeError(f"no separated form for {type(local).__name__}")
-    geometry = np.array([*grid.lower, *grid.upper, 1.0 / d.element_width])
-    n_elements = np.array(d.n_elements, dtype=np.int64)
-    connectivity = np.ascontiguousarray(d.connectivity, dtype=np.int32)
     tensor = _tensor_form(factors_x, factors_y, terms, weights)
     if tensor is not None:
         fx, fy, order = tensor
         tensor = TensorTables((0,) * fx.shape[1], geometry, n_elements, fx, table_x, fy, table_y,
                               np.ascontiguousarray(connectivity[:, order]), order)
-    return BasisTables(geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, weights, connectivity,
-                       tensor)
+    factors_x, factors_y, terms, weights = flat
+    return BasisTables((0,) * factors_x.shape[1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                       terms, weights, connectivity, tensor)
+
+
+def _lagrange_expansion(local: LocalPolynomials):
+    """Any basis of degree d per coordinate in the tensor Lagrange basis of Q_d:
+    ``phi_k = sum_s T[s, k] L_a(xi) L_b(eta)`` (s = a (d + 1) + b) with
+    ``T[s, k] = phi_k`` at the lattice point ``(a / d, b / d)``, exact since
+    tensor interpolation reproduces Q_d.  Serendipity: each function is its own
+    Q2 function plus ``-1/4`` (corners) or ``1/2`` (mid-sides) of the centre one.
+
+    Returns ``(factors_x, factors_y, slots, weights)`` with the nonzero
+    ``T[s, k]`` as rows ``slots[k], weights[k]`` (padded with zero weights).
+    """
+    n1 = local.degree + 1
+    points = np.linspace(0.0, 1.0, n1)
+    lagrange = np.linalg.inv(np.vander(points, n1, increasing=True)).T  # row a: coefficients of L_a
+    xi, eta = (a.ravel() for a in np.meshgrid(points, points, indexing="ij"))
+    expansion, _, _ = local.evaluate(np.column_stack([xi, eta]))  # (n1 * n1, n_local)
+    expansion[np.abs(expansion) < 1e-13] = 0.0
+    width = max(1, int((expansion != 0).sum(axis=0).max()))
+    slots = np.zeros((local.n_local, width), dtype=np.int32)
+    weights = np.zeros((local.n_local, width))
+    for k in range(local.n_local):
+        nonzero = np.flatnonzero(expansion[:, k])
+        slots[k, : len(nonzero)] = nonzero
+        weights[k, : len(nonzero)] = expansion[nonzero, k]
+    return lagrange[None].copy(), lagrange[None].copy(), slots, weights
 
 
 def _tensor_form(factors_x, factors_y, terms, weights):
@@ -228,41 +262,47 @@ def _factors(s, factors, table, values, slopes):
         slopes[i] = slope
 
 
-@numba.njit(cache=True)
-def evaluate_point(px, py, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
-                   fx, dfx, fy, dfy, w, wx, wy):
+@numba.njit(cache=True, inline="always")
+def evaluate_point(px, py, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
+                   q, qx, qy, unused, w, wx, wy):
     """Shape functions of one point into ``w, wx, wy`` (n_local); returns its element (-1 if outside)."""
-    element, xi, eta, ix, iy = locate_point(px, py, geometry, n_elements)
+    element, fx, dfx, fy, dfy = tensor_weights(px, py, marker, geometry, n_elements, factors_x, table_x,
+                                               factors_y, table_y)
     if element < 0:
         return element
-    _factors(xi, factors_x, table_x[ix], fx, dfx)
-    _factors(eta, factors_y, table_y[iy], fy, dfy)
-    scale = geometry[4]
+    n1 = len(marker)
+    for i in range(n1):
+        for j in range(n1):
+            q[i * n1 + j] = fx[i] * fy[j]
+            qx[i * n1 + j] = dfx[i] * fy[j]
+            qy[i * n1 + j] = fx[i] * dfy[j]
     for k in range(w.shape[0]):
-        w[k] = 0.0
-        wx[k] = 0.0
-        wy[k] = 0.0
-    for t in range(terms.shape[0]):
-        k, i, j = terms[t, 0], terms[t, 1], terms[t, 2]
-        c = term_weights[t]
-        w[k] += c * fx[i] * fy[j]
-        wx[k] += c * dfx[i] * fy[j]
-        wy[k] += c * fx[i] * dfy[j]
-    for k in range(w.shape[0]):
-        wx[k] *= scale
-        wy[k] *= scale
+        value = 0.0
+        slope_x = 0.0
+        slope_y = 0.0
+        for t in range(terms.shape[1]):
+            s = terms[k, t]
+            c = term_weights[k, t]
+            value += c * q[s]
+            slope_x += c * qx[s]
+            slope_y += c * qy[s]
+        w[k] = value
+        wx[k] = slope_x
+        wy[k] = slope_y
     return element
 
 
 @numba.njit(cache=True)
 def scratch(factors_x, factors_y, n_local):
     """Per-point work arrays for :func:`evaluate_point`."""
-    return (np.empty(factors_x.shape[1]), np.empty(factors_x.shape[1]), np.empty(factors_y.shape[1]),
-            np.empty(factors_y.shape[1]), np.empty(n_local), np.empty(n_local), np.empty(n_local))
+    n = factors_x.shape[1] * factors_y.shape[1]
+    return (np.empty(n), np.empty(n), np.empty(n), np.empty(1), np.empty(n_local), np.empty(n_local),
+            np.empty(n_local))
 
 
 @numba.njit(cache=True)
-def shape_function_data(x, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity,
+def shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
+                        connectivity,
                         values, d_x, d_y, nodes):
     """``N, dNdx, dNdy`` of every point as fixed-width rows (n, n_local), and their nodes.
 
@@ -271,7 +311,7 @@ def shape_function_data(x, geometry, n_elements, factors_x, table_x, factors_y, 
     n_local = connectivity.shape[1]
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
+        element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         if element < 0:
             return p

@@ -46,7 +46,7 @@ def _relative_velocity(velocity, v_ref, relative):
 
 @numba.njit(cache=True)
 def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
-        geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity,
+        marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity,
         grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, slots, matrix):
     """Scatter mass, relative momentum (and the mass matrix, into the fixed
     pattern of :mod:`.pattern`) to the grid.
@@ -64,7 +64,7 @@ def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
     if assemble:
         matrix[:] = 0.0
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
+        element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         if element < 0:
             return p
@@ -91,8 +91,8 @@ def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
 
 @numba.njit(cache=True)
 def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
-                                    geometry, n_elements, factors_x, table_x, factors_y, table_y, terms,
-                                    term_weights, connectivity, strain, stress, force, divergence):
+                                    marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                                    terms, term_weights, connectivity, strain, stress, force, divergence):
     """Eqs. 18, 6 and 11 in one pass, for bodies of :class:`LinearElastic` material.
 
     ``lame[b] = (lambda, 2 mu)`` of body b.  Returns the sum of the new
@@ -104,7 +104,7 @@ def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_
     force[:] = 0.0
     total = 0.0
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
+        element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         # dv_dx = dNdx @ v_rel: (d vx/dx, d vy/dx); dv_dy likewise
         dvx_dx = 0.0
@@ -149,14 +149,14 @@ def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_
 
 @numba.njit(cache=True)
 def flat_velocity_gradient(x, velocity, v_ref, relative, dt,
-                      geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
+                      marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
                       connectivity, strain, strain_increment, gradient_increment, divergence):
     """Eq. 18 for any material: the strain increment (added to ``strain``) and ``dt L``."""
     _relative_velocity(velocity, v_ref, relative)
     n_local = connectivity.shape[1]
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
+        element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         dvx_dx = 0.0
         dvy_dx = 0.0
@@ -184,7 +184,7 @@ def flat_velocity_gradient(x, velocity, v_ref, relative, dt,
 
 @numba.njit(cache=True)
 def flat_internal_force(x, mass_p, density_p, stress,
-                   geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
+                   marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
                    connectivity, force):
     """Eq. 11: ``f_I = -sum_p V_p sigma_p grad N_I`` with the volumes of time t."""
     n_local = connectivity.shape[1]
@@ -192,7 +192,7 @@ def flat_internal_force(x, mass_p, density_p, stress,
     force[:] = 0.0
     total = 0.0
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
+        element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         volume = mass_p[p] / density_p[p]
         w_xx = volume * stress[p, 0]
@@ -208,14 +208,14 @@ def flat_internal_force(x, mass_p, density_p, stress,
 
 @numba.njit(cache=True)
 def flat_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
-        geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity):
+        marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity):
     """Eqs. 19-21: point velocity from the grid acceleration, position from the
     grid velocity of the step's start, density.  Returns ``sum(v) + sum(x)``."""
     n_local = connectivity.shape[1]
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     total = 0.0
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
+        element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         ax = 0.0
         ay = 0.0
