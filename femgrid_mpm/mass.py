@@ -142,6 +142,9 @@ class ConsistentMass:
     #: the simulation.  A coupled matrix must leave them out of the solve
     #: (zeroing them afterwards, exact for a diagonal mass, is wrong here).
     fixed: np.ndarray | None = field(default=None, repr=False)
+    #: CG's preconditioner for cubic B-splines (see :func:`tensor_preconditioner`);
+    #: None: Jacobi
+    preconditioner: "TensorPreconditioner | None" = field(default=None, repr=False)
     kind = "consistent"
     iterations: int = 0
     weak_nodes: int = 0
@@ -239,7 +242,8 @@ class ConsistentMass:
             return _direct_solve(system.factors, system.matrix, rhs)
         guess = self._initial_guess(rhs, kind, system)
         solution, converged, iterations = _preconditioned_cg(
-            system.matrix, rhs, guess, system.inverse_diagonal, self.tolerance, self.max_iterations
+            system.matrix, rhs, guess, system.inverse_diagonal, self.tolerance, self.max_iterations,
+            None if self.preconditioner is None else self.preconditioner.scaled(system)
         )
         self.iterations += iterations
         return solution, converged
@@ -403,23 +407,29 @@ def _exclude_in_place(indptr, indices, data, diagonal_index, excluded):
 @numba.njit(cache=True)
 def _csr_times_dense(indptr, indices, data, x, out):
     """``out = A @ x`` for x of shape (n, 1) or (n, 2)."""
-    two = x.shape[1] == 2
-    for i in range(len(indptr) - 1):
-        first = 0.0
-        second = 0.0
-        for entry in range(indptr[i], indptr[i + 1]):
-            j = indices[entry]
-            first += data[entry] * x[j, 0]
-            if two:
-                second += data[entry] * x[j, 1]
-        out[i, 0] = first
-        if two:
+    if x.shape[1] == 2:
+        for i in range(len(indptr) - 1):
+            first = 0.0
+            second = 0.0
+            for entry in range(indptr[i], indptr[i + 1]):
+                j = indices[entry]
+                a = data[entry]
+                first += a * x[j, 0]
+                second += a * x[j, 1]
+            out[i, 0] = first
             out[i, 1] = second
+    else:
+        for i in range(len(indptr) - 1):
+            first = 0.0
+            for entry in range(indptr[i], indptr[i + 1]):
+                first += data[entry] * x[indices[entry], 0]
+            out[i, 0] = first
     return out
 
 
 @numba.njit(cache=True)
-def _compiled_cg(indptr, indices, data, b, x0, inverse_diagonal, rtol, max_iterations):
+def _compiled_cg(indptr, indices, data, b, x0, inverse_diagonal, rtol, max_iterations,
+                 use_tensor, scale, excluded, factor_x, factor_y):
     """:func:`_preconditioned_cg` compiled, for one or two columns (the same steps)."""
     n, k = b.shape
     x = x0.copy()
@@ -438,9 +448,14 @@ def _compiled_cg(indptr, indices, data, b, x0, inverse_diagonal, rtol, max_itera
         for i in range(n):
             norm += b[i, c] * b[i, c]
         target[c] = rtol * np.sqrt(norm)
+    if use_tensor:
+        _apply_tensor(r, z, scale, excluded, factor_x, factor_y)
+    else:
+        for i in range(n):
+            for c in range(k):
+                z[i, c] = inverse_diagonal[i] * r[i, c]
     for i in range(n):
         for c in range(k):
-            z[i, c] = inverse_diagonal[i] * r[i, c]
             p[i, c] = z[i, c]
             rz[c] += r[i, c] * z[i, c]
     for iteration in range(max_iterations + 1):
@@ -472,7 +487,14 @@ def _compiled_cg(indptr, indices, data, b, x0, inverse_diagonal, rtol, max_itera
             for c in range(k):
                 x[i, c] += alpha[c] * p[i, c]
                 r[i, c] -= alpha[c] * Ap[i, c]
-                z[i, c] = inverse_diagonal[i] * r[i, c]
+        if use_tensor:
+            _apply_tensor(r, z, scale, excluded, factor_x, factor_y)
+        else:
+            for i in range(n):
+                for c in range(k):
+                    z[i, c] = inverse_diagonal[i] * r[i, c]
+        for i in range(n):
+            for c in range(k):
                 rz_new[c] += r[i, c] * z[i, c]
         for c in range(k):
             beta = rz_new[c] / rz[c] if rz[c] != 0.0 else 0.0
@@ -480,6 +502,105 @@ def _compiled_cg(indptr, indices, data, b, x0, inverse_diagonal, rtol, max_itera
                 p[i, c] = z[i, c] + beta * p[i, c]
             rz[c] = rz_new[c]
     return x, False, max_iterations
+
+
+@dataclass(frozen=True)
+class TensorPreconditioner:
+    """CG's preconditioner for tensor-product cubic B-splines: ``z = S^-1 (K_x ⊗ K_y)^-1 S^-1 r``.
+
+    Inside a body of uniform density, ``N.T diag(m) N`` approaches ``rho h^2
+    K_x ⊗ K_y`` with ``K`` the 1D Gram matrix of the splines (stencil
+    ``(1, 120, 1191, 2416, 1191, 120, 1) / 5040``); its Jacobi-scaled form
+    has a condition number near 350 in 2D, where CG needed ~340 iterations
+    at 1e5 nodes.  ``S = sqrt(M_ii / K_ii)`` carries each node's mass and the
+    tensor inverse is two sweeps of banded Cholesky solves, O(n); CG then
+    needs ~25.  It is symmetric positive definite on the kept degrees of
+    freedom (a principal block of the inverse of an SPD matrix), the excluded
+    ones keep their identity rows.
+    """
+
+    factor_x: np.ndarray  # (4, n_x) upper banded Cholesky factor of K_x
+    factor_y: np.ndarray
+    gram_diagonal: float
+
+    def scaled(self, system: "_System") -> tuple:
+        """The arguments of :func:`_apply_tensor` for one system."""
+        diagonal = 1.0 / system.inverse_diagonal
+        scale = np.where(system.excluded, 0.0, 1.0 / np.sqrt(np.abs(diagonal) / self.gram_diagonal))
+        return (scale, system.excluded, self.factor_x, self.factor_y)
+
+
+def tensor_preconditioner(grid) -> TensorPreconditioner | None:
+    """For cubic B-spline grids (nodes numbered ``i * n_y + j``), else None (Jacobi)."""
+    from scipy.linalg import cholesky_banded
+
+    if grid.basis not in ("bspline3", "bspline3_open"):
+        return None
+    stencil = np.array([2416.0, 1191.0, 120.0, 1.0]) / 5040.0
+    factors = []
+    for n_cells in grid.discretization.n_elements:
+        n = n_cells + 3
+        banded = np.zeros((4, n))
+        for offset in range(4):
+            banded[3 - offset, offset:] = stencil[offset]
+        factors.append(np.ascontiguousarray(cholesky_banded(banded, lower=False)))
+    if factors[0].shape[1] * factors[1].shape[1] != grid.n_nodes:  # pragma: no cover
+        return None
+    return TensorPreconditioner(factors[0], factors[1], stencil[0] ** 2)
+
+
+_NO_TENSOR = (False, np.zeros(1), np.zeros(1, dtype=bool), np.zeros((4, 1)), np.zeros((4, 1)))
+
+
+@numba.njit(cache=True)
+def _banded_sweeps(factor, values, count, n_lines):
+    """Solve ``U^T U z = values`` in place on ``n_lines`` independent lattice lines
+    at once (U upper banded, bandwidth 3, ``factor[3 + i - j, j] = U[i, j]``):
+    entry ``j`` of line ``l`` is ``values[j * n_lines + l]``, so the inner loop
+    runs over contiguous, independent lines."""
+    for j in range(count):
+        row = j * n_lines
+        for line in range(n_lines):
+            total = values[row + line]
+            if j >= 3:
+                total -= factor[0, j] * values[row - 3 * n_lines + line]
+            if j >= 2:
+                total -= factor[1, j] * values[row - 2 * n_lines + line]
+            if j >= 1:
+                total -= factor[2, j] * values[row - n_lines + line]
+            values[row + line] = total / factor[3, j]
+    for i in range(count - 1, -1, -1):
+        row = i * n_lines
+        for line in range(n_lines):
+            total = values[row + line]
+            if i + 1 < count:
+                total -= factor[2, i + 1] * values[row + n_lines + line]
+            if i + 2 < count:
+                total -= factor[1, i + 2] * values[row + 2 * n_lines + line]
+            if i + 3 < count:
+                total -= factor[0, i + 3] * values[row + 3 * n_lines + line]
+            values[row + line] = total / factor[3, i]
+
+
+@numba.njit(cache=True)
+def _apply_tensor(r, out, scale, excluded, factor_x, factor_y):
+    """``out = S^-1 (K_x ⊗ K_y)^-1 S^-1 r`` on kept nodes, ``r`` on excluded ones
+    (node ``ix * n_y + iy``)."""
+    n_x, n_y = factor_x.shape[1], factor_y.shape[1]
+    line = np.empty(n_x * n_y)
+    transposed = np.empty(n_x * n_y)
+    for c in range(r.shape[1]):
+        for ix in range(n_x):
+            for iy in range(n_y):
+                transposed[iy * n_x + ix] = scale[ix * n_y + iy] * r[ix * n_y + iy, c]
+        _banded_sweeps(factor_y, transposed, n_y, n_x)  # along y, the lines (ix) contiguous
+        for ix in range(n_x):
+            for iy in range(n_y):
+                line[ix * n_y + iy] = transposed[iy * n_x + ix]
+        _banded_sweeps(factor_x, line, n_x, n_y)  # along x, the lines (iy) contiguous
+        for i in range(n_x * n_y):
+            out[i, c] = r[i, c] if excluded[i] else scale[i] * line[i]
+    return out
 
 
 class _CompiledCSR(sp.csr_matrix):
@@ -504,7 +625,7 @@ def _lump_couplings(matrix: sp.csr_matrix, weak: np.ndarray) -> sp.csr_matrix:
     return (kept + sp.diags(to_diagonal)).tocsr()
 
 
-def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations):
+def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=None):
     """Jacobi-preconditioned CG on the columns of ``b`` (n, k) at once.
 
     Returns ``(x, converged, iterations)``.  Converged means every column's
@@ -514,11 +635,18 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations):
     """
     if isinstance(A, _CompiledCSR):
         return _compiled_cg(A.indptr, A.indices, A.data, np.ascontiguousarray(b, dtype=float),
-                            np.ascontiguousarray(x0, dtype=float), inverse_diagonal, rtol, max_iterations)
+                            np.ascontiguousarray(x0, dtype=float), inverse_diagonal, rtol, max_iterations,
+                            *(_NO_TENSOR if tensor is None else (True, *tensor)))
+
+    def precondition(r):
+        if tensor is None:
+            return inverse_diagonal[:, None] * r
+        return _apply_tensor(np.ascontiguousarray(r), np.empty_like(r), *tensor)
+
     x = x0.copy()
     target = rtol * np.linalg.norm(b, axis=0)
     r = b - A @ x
-    z = inverse_diagonal[:, None] * r
+    z = precondition(r)
     p = z.copy()
     rz = np.einsum("ij,ij->j", r, z)
     for iteration in range(max_iterations + 1):
@@ -533,7 +661,7 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations):
         alpha = np.divide(rz, curvature, out=np.zeros_like(rz), where=curvature > 0)
         x += alpha * p
         r -= alpha * Ap
-        z = inverse_diagonal[:, None] * r
+        z = precondition(r)
         rz_new = np.einsum("ij,ij->j", r, z)
         beta = np.divide(rz_new, rz, out=np.zeros_like(rz), where=rz != 0)
         p = z + beta * p

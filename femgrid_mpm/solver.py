@@ -30,7 +30,7 @@ from .energy import EnergyBookkeeping
 from .expressions import compile_expression
 from .grid import Grid
 from .kernels.engines import TRANSFERS
-from .mass import ConsistentMass, LumpedMass, SingularMassError
+from .mass import ConsistentMass, LumpedMass, SingularMassError, tensor_preconditioner
 from .materials import make_material
 from .particles import Particles, seed_rectangle
 from .scene import Scene
@@ -145,6 +145,7 @@ class Simulation:
             tolerance=solver.cg_tolerance,
             fallback=solver.consistent_fallback,
             blend=solver.blend,
+            preconditioner=tensor_preconditioner(self.grid),
         )
 
     def _time_step(self) -> float:
