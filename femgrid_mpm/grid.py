@@ -137,10 +137,14 @@ class Grid:
         corners = self.lower + d.element_width * np.column_stack([ix.ravel(), iy.ravel()])
         gx, gy = np.meshgrid(gauss, gauss, indexing="ij")
         offsets = d.element_width * np.column_stack([gx.ravel(), gy.ravel()])
-        points = (corners[:, None, :] + offsets[None, :, :]).reshape(-1, 2)
-        area = np.tile(np.outer(weights, weights).ravel(), len(corners)) * d.element_width**2
-        N, _, _ = self.shape_functions(points)
-        return N.T @ area
+        area = np.outer(weights, weights).ravel() * d.element_width**2
+        integrals = np.zeros(self.n_nodes)
+        chunk = 4096  # elements at a time: the matrices of all Gauss points at once were ~1.4 KB per particle
+        for start in range(0, len(corners), chunk):
+            points = (corners[start : start + chunk, None, :] + offsets[None, :, :]).reshape(-1, 2)
+            N, _, _ = self.shape_functions(points)
+            integrals += N.T @ np.tile(area, len(points) // len(area))
+        return integrals
 
     def __repr__(self) -> str:
         return (

@@ -294,7 +294,8 @@ class _System:
             inverse_diagonal = 1.0 / reduced.diagonal()
         else:  # the same on a structure with every diagonal entry: zero rows and columns, unit diagonal
             data = _exclude_in_place(matrix.indptr, matrix.indices, matrix.data.copy(), diagonal_index, excluded)
-            reduced = _CompiledCSR((data, matrix.indices.copy(), matrix.indptr.copy()), shape=matrix.shape)
+            # the index arrays are shared with the (internal) assembled matrix: nothing sorts them
+            reduced = _CompiledCSR((data, matrix.indices, matrix.indptr), shape=matrix.shape, copy=False)
             inverse_diagonal = 1.0 / data[diagonal_index]
         return cls(columns, excluded, reduced, inverse_diagonal, _factor(reduced) if direct else None)
 

@@ -87,20 +87,21 @@ def mass_pattern(grid, connectivity: np.ndarray) -> MassPattern:
     counts = present.sum(axis=1)
     indptr = np.zeros(n_nodes + 1, dtype=np.int64)
     np.cumsum(counts, out=indptr[1:])
-    rank = np.where(present, np.cumsum(present, axis=1) - 1, -1).astype(np.int32)
-    # column of each present slot: the node at lattice position L_i + offset
-    low = lattice.min(axis=0)
-    extent = lattice.max(axis=0) - low + 1
-    node_at = np.full(tuple(extent), -1, dtype=np.int64)
-    node_at[tuple((lattice - low).T)] = np.arange(n_nodes)
-    rows, slot = np.nonzero(present)  # row-major: each row's slots in stencil order
-    target = lattice[rows] + stencil[slot] - low
-    columns = node_at[target[:, 0], target[:, 1]]
+    if indptr[-1] >= 2**31:
+        raise ValueError("the mass matrix is too large for 32-bit indices")
+    rank = np.cumsum(present, axis=1, dtype=np.int32) - 1
+    rank[~present] = -1
+    # column of each present slot: the node at lattice position L_i + offset (slot by slot: little memory)
+    reach = np.abs(stencil).max()
+    low = lattice.min(axis=0) - reach
+    node_at = np.full(tuple(lattice.max(axis=0) + reach - low + 1), -1, dtype=np.int32)
+    node_at[tuple((lattice - low).T)] = np.arange(n_nodes, dtype=np.int32)
+    neighbour = np.empty((n_nodes, len(stencil)), dtype=np.int32)
+    for slot, offset in enumerate(stencil):
+        neighbour[:, slot] = node_at[lattice[:, 0] - low[0] + offset[0], lattice[:, 1] - low[1] + offset[1]]
+    columns = neighbour[present]  # row-major: each row's slots in stencil order
     if np.any(columns < 0):
         raise AssertionError("a coupled node is missing from the lattice")
     center = int(np.flatnonzero((stencil == 0).all(axis=1))[0])
     diagonal = indptr[:-1] + rank[:, center]
-    if indptr[-1] >= 2**31:
-        raise ValueError("the mass matrix is too large for 32-bit indices")
-    return MassPattern(indptr.astype(np.int32), columns.astype(np.int32), np.zeros(int(indptr[-1])), rank, slots,
-                       diagonal.astype(np.int64))
+    return MassPattern(indptr.astype(np.int32), columns, np.zeros(int(indptr[-1])), rank, slots, diagonal)
