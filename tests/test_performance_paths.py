@@ -1,0 +1,82 @@
+"""The performance paths compute what the plain ones do: the tensor preconditioner,
+the fixed mass pattern, the compiled CSR product and the benchmark's scene."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse.linalg as spla
+
+from femgrid_mpm import Grid
+from femgrid_mpm.bases import BASES
+from femgrid_mpm.kernels.basis import separated_tables
+from femgrid_mpm.kernels.pattern import mass_pattern
+from femgrid_mpm.mass import _apply_tensor, _csr_times_dense, tensor_preconditioner
+from femgrid_mpm.solver import Simulation
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+from step import block_scene  # noqa: E402
+
+
+@pytest.mark.parametrize("basis", list(BASES))
+def test_mass_pattern_is_the_structure_of_the_mass_matrix(basis):
+    """Exactly the couplings of N.T N for points everywhere, and every diagonal entry."""
+    grid = Grid(basis, (0.0, 0.0), (3.0, 2.0), 0.5)
+    tables = separated_tables(grid)
+    pattern = mass_pattern(grid, tables.tensor.connectivity if tables.tensor else tables.connectivity)
+    points = grid.lower + np.random.default_rng(0).random((3000, 2)) * (grid.upper - grid.lower)
+    N, _, _ = grid.shape_functions(points)
+    coupled = (abs(N).T @ abs(N)).tocsr() > 0
+    structure = pattern.matrix()
+    structure.data[:] = 1.0
+    assert (coupled != (structure > 0)).nnz == 0
+    np.testing.assert_array_equal(pattern.indices[pattern.diagonal], np.arange(grid.n_nodes))
+
+
+@pytest.mark.parametrize("basis", ["bspline3", "bspline3_open"])
+def test_tensor_preconditioner_is_symmetric_positive_definite(basis):
+    grid = Grid(basis, (0.0, 0.0), (3.0, 2.0), 0.5)
+    preconditioner = tensor_preconditioner(grid)
+    n = grid.n_nodes
+    rng = np.random.default_rng(1)
+    scale = rng.uniform(0.5, 2.0, n)
+    excluded = rng.random(n) < 0.1
+    scale[excluded] = 0.0
+    identity = np.eye(n)
+    P = _apply_tensor(identity, np.empty_like(identity), scale, excluded, preconditioner.factor_x, preconditioner.factor_y)
+    np.testing.assert_allclose(P, P.T, rtol=0, atol=1e-12 * np.abs(P).max())
+    assert np.linalg.eigvalsh(0.5 * (P + P.T)).min() > 0
+    assert tensor_preconditioner(Grid("q1", (0.0, 0.0), (3.0, 2.0), 0.5)) is None
+
+
+def test_preconditioned_cg_solves_the_consistent_system():
+    """CG (tensor preconditioner, compiled) against SuperLU on the same matrix."""
+    simulation = Simulation(block_scene("bspline3", "consistent", 400))
+    simulation.mass.linear_solver = "cg"
+    simulation.mass.tolerance = 1e-12
+    simulation.advance()
+    system = simulation.mass._systems[0]
+    rhs = np.where(system.excluded[:, None], 0.0, simulation.context.force)
+    solution = simulation.mass._solve(system, rhs, "check")[0]
+    expected = spla.spsolve(system.matrix.tocsc(), rhs)
+    np.testing.assert_allclose(solution, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
+    assert 0 < simulation.mass.iterations < 60 * 2 * 2  # ~25 per solve, against ~100 with Jacobi here
+
+
+def test_compiled_csr_product():
+    rng = np.random.default_rng(2)
+    import scipy.sparse as sp
+
+    A = sp.random(50, 50, density=0.2, random_state=3, format="csr")
+    for columns in (1, 2):
+        x = rng.random((50, columns))
+        np.testing.assert_allclose(_csr_times_dense(A.indptr, A.indices, A.data, x, np.empty_like(x)), A @ x,
+                                   rtol=1e-14, atol=1e-14)
+
+
+def test_benchmark_scene_is_the_intended_block():
+    simulation = Simulation(block_scene("q1", "lumped", 1000))
+    assert simulation.particles.n == 16 * 16 * 4
+    assert simulation.active_effects == []
+    simulation.advance()
