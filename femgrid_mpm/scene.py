@@ -100,6 +100,8 @@ class SolverSpec(_Model):
     cg_tolerance: Annotated[float, Field(gt=0, lt=1)] = 1e-10
     #: the step's transfers: compiled kernels, or scipy.sparse (the reference)
     engine: Literal["numba", "scipy"] = "numba"
+    #: numba engine: threads for the tensor-product kernels (1: serial, reproducible bit for bit)
+    threads: Annotated[int, Field(ge=1, le=256)] = 1
 
 
 class Material(_Model):

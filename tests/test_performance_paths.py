@@ -80,3 +80,19 @@ def test_benchmark_scene_is_the_intended_block():
     assert simulation.particles.n == 16 * 16 * 4
     assert simulation.active_effects == []
     simulation.advance()
+
+
+@pytest.mark.filterwarnings("ignore::femgrid_mpm.diagnostics.NegativeMassWarning")
+@pytest.mark.parametrize("basis", ["q1", "q2", "bspline3"])
+def test_threaded_kernels_agree_with_serial_ones(basis):
+    """solver.threads = 2: the chunked kernels give the serial results to rounding."""
+    serial = Simulation(block_scene(basis, "lumped", 1000))
+    threaded = Simulation(block_scene(basis, "lumped", 1000).with_overrides(**{"solver.threads": 2}))
+    assert threaded.transfer.threads == 2
+    for _ in range(5):
+        serial.advance()
+        threaded.advance()
+        for name in ("x", "v", "stress", "density"):
+            expected, actual = getattr(serial.particles, name), getattr(threaded.particles, name)
+            np.testing.assert_allclose(actual, expected, rtol=0, atol=1e-12 * np.abs(expected).max(), err_msg=name)
+            getattr(threaded.particles, name)[:] = expected

@@ -21,11 +21,13 @@ interface (``[solver] engine`` picks the implementation):
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 
 from ..effects.base import StepContext
 from ..materials import LinearElastic
+from . import parallel
 from . import transfer as kernels
 from .basis import evaluate_shape_functions, separated_tables
 from .pattern import mass_pattern
@@ -105,6 +107,16 @@ class CompiledTransfer:
             connectivity = self.basis.tensor.connectivity if family == "tensor" else self.basis.connectivity
             self.pattern = mass_pattern(grid, connectivity)
             self.grid_volume = np.zeros(n_nodes)
+        # threads: chunked variants of the tensor kernels (lumped P2G, linear elastic stress, G2P)
+        threads = int(getattr(simulation.scene.solver, "threads", 1))
+        self.threads = min(threads, numba.config.NUMBA_NUM_THREADS) if family == "tensor" else 1
+        if self.threads > 1:
+            numba.set_num_threads(self.threads)
+            self._mass_parts = np.zeros((self.threads, n_nodes))
+            self._absolute_parts = np.zeros((self.threads, n_nodes if self.signed else 1))
+            self._momentum_parts = np.zeros((self.threads, n_nodes, 2))
+            self._force_parts = np.zeros((self.threads, n_nodes, 2))
+            self._relative_parts = np.zeros((self.threads, n_nodes, 2))
         self._lame = None
         materials = simulation.materials
         if all(type(material) is LinearElastic for material in materials):
@@ -118,11 +130,16 @@ class CompiledTransfer:
         self.matrices.invalidate()
         momentum = np.empty((self.grid.n_nodes, 2))
         pattern = self.pattern
-        outside = self._p2g(
-            p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, pattern is not None, pattern is not None,
-            *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum,
-            *(self._no_pattern if pattern is None else (pattern.indptr, pattern.rank, pattern.slots, pattern.data)),
-        )
+        if self.threads > 1 and pattern is None:
+            outside = parallel.parallel_p2g(
+                p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, *self._arrays, self.grid_mass,
+                self.grid_absolute, momentum, self._mass_parts, self._absolute_parts, self._momentum_parts)
+        else:
+            outside = self._p2g(
+                p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, pattern is not None, pattern is not None,
+                *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum,
+                *(self._no_pattern if pattern is None else (pattern.indptr, pattern.rank, pattern.slots, pattern.data)),
+            )
         if outside >= 0:
             self.grid.locate(p.x)  # raises the ValueError naming the points outside
             raise AssertionError(f"point {outside} is outside the grid")  # pragma: no cover
@@ -137,6 +154,12 @@ class CompiledTransfer:
     def internal_force(self, ctx: StepContext, dt: float, materials, body_slices) -> np.ndarray:
         p = ctx.particles
         force = np.empty((self.grid.n_nodes, 2))
+        if self._lame is not None and self.threads > 1:
+            self._stress_total = parallel.parallel_stress_and_force(
+                p.x, ctx.velocity, ctx.frame_velocity, self._relative, dt, p.mass, p.density, p.body, self._lame,
+                *self._arrays, p.strain, p.stress, force, self.divergence, self._force_parts, self._relative_parts,
+            )
+            return force
         if self._lame is not None:
             self._stress_total = self._stress_and_force(
                 p.x, ctx.velocity, ctx.frame_velocity, self._relative, dt, p.mass, p.density, p.body, self._lame,
@@ -155,8 +178,12 @@ class CompiledTransfer:
 
     def to_points(self, ctx: StepContext, dt: float) -> float:
         p = ctx.particles
-        total = self._g2p(p.x, p.v, p.density, ctx.acceleration, self._relative, ctx.frame_velocity, dt,
-                          self.divergence, *self._arrays)
+        if self.threads > 1:
+            total = parallel.parallel_g2p(p.x, p.v, p.density, ctx.acceleration, self._relative, ctx.frame_velocity,
+                                          dt, self.divergence, *self._arrays, self.threads)
+        else:
+            total = self._g2p(p.x, p.v, p.density, ctx.acceleration, self._relative, ctx.frame_velocity, dt,
+                              self.divergence, *self._arrays)
         self.matrices.invalidate()  # the points moved
         return total + self._stress_total
 

@@ -1,0 +1,103 @@
+"""Threaded variants of the tensor-product transfer kernels (``[solver] threads > 1``).
+
+The points are cut into ``n_chunks`` contiguous chunks, one per thread; each
+chunk runs the serial kernel of :mod:`.transfer` on its slice, scattering into
+its own copy of the grid arrays, and the copies are summed in chunk order.
+The result is therefore the same from run to run for a given number of
+threads (not bit for bit the serial one: the grid sums are grouped by chunk).
+Consistent mass and the general (flat) kernels stay serial.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba import prange
+
+from .transfer import tensor_g2p, tensor_linear_elastic_stress_and_force, tensor_p2g
+
+
+@numba.njit(cache=True, inline="always")
+def _bounds(chunk, n_chunks, n):
+    return chunk * n // n_chunks, (chunk + 1) * n // n_chunks
+
+
+@numba.njit(cache=True)
+def _sum_parts(parts, out):
+    """``out = sum_c parts[c]`` in chunk order (serial: one parallel region per kernel)."""
+    flat_out = out.reshape(-1)
+    flat_parts = parts.reshape(parts.shape[0], -1)
+    for i in range(flat_out.shape[0]):
+        total = 0.0
+        for c in range(flat_parts.shape[0]):
+            total += flat_parts[c, i]
+        flat_out[i] = total
+
+
+@numba.njit(cache=True, parallel=True)
+def parallel_p2g(x, v, mass_p, density_p, v_ref, signed,
+                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity,
+                 grid_mass, grid_absolute, momentum, mass_parts, absolute_parts, momentum_parts):
+    """:func:`tensor_p2g` (lumped) over chunks of points; returns the first point outside, or -1."""
+    n_chunks = mass_parts.shape[0]
+    n = x.shape[0]
+    outside = np.full(n_chunks, -1)
+    no_volume = np.zeros(1)
+    no_index = np.zeros(2, np.int32)
+    no_table = np.zeros((1, 1), np.int32)
+    no_matrix = np.zeros(1)
+    for chunk in prange(n_chunks):
+        start, stop = _bounds(chunk, n_chunks, n)
+        found = tensor_p2g(x[start:stop], v[start:stop], mass_p[start:stop], density_p[start:stop], v_ref, signed,
+                           False, False, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                           connectivity, mass_parts[chunk], absolute_parts[chunk], no_volume, momentum_parts[chunk],
+                           no_index, no_table, no_table, no_matrix)
+        if found >= 0:
+            outside[chunk] = start + found
+    for chunk in range(n_chunks):
+        if outside[chunk] >= 0:
+            return outside[chunk]
+    _sum_parts(mass_parts, grid_mass)
+    _sum_parts(momentum_parts, momentum)
+    if signed:
+        _sum_parts(absolute_parts, grid_absolute)
+    return -1
+
+
+@numba.njit(cache=True, parallel=True)
+def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
+                              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity,
+                              strain, stress, force, divergence, force_parts, relative_parts):
+    """:func:`tensor_linear_elastic_stress_and_force` over chunks of points."""
+    n_chunks = force_parts.shape[0]
+    n = x.shape[0]
+    totals = np.zeros(n_chunks)
+    for chunk in prange(n_chunks):
+        start, stop = _bounds(chunk, n_chunks, n)
+        totals[chunk] = tensor_linear_elastic_stress_and_force(
+            x[start:stop], velocity, v_ref, relative_parts[chunk], dt, mass_p[start:stop], density_p[start:stop],
+            body[start:stop], lame, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+            connectivity, strain[start:stop], stress[start:stop], force_parts[chunk], divergence[start:stop])
+    _sum_parts(force_parts, force)
+    relative[:] = relative_parts[0]
+    total = 0.0
+    for chunk in range(n_chunks):
+        total += totals[chunk]
+    return total
+
+
+@numba.njit(cache=True, parallel=True)
+def parallel_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
+                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity, n_chunks):
+    """:func:`tensor_g2p` over chunks of points (no scatter: nothing to combine but the checksum)."""
+    n = x.shape[0]
+    totals = np.zeros(n_chunks)
+    for chunk in prange(n_chunks):
+        start, stop = _bounds(chunk, n_chunks, n)
+        totals[chunk] = tensor_g2p(x[start:stop], v[start:stop], density_p[start:stop], acceleration, relative, v_ref,
+                                   dt, divergence[start:stop], marker, geometry, n_elements, factors_x, table_x,
+                                   factors_y, table_y, connectivity)
+    total = 0.0
+    for chunk in range(n_chunks):
+        total += totals[chunk]
+    return total
