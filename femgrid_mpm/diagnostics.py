@@ -59,11 +59,14 @@ class NegativeMassMonitor:
         self.min_ratio = min(self.min_ratio, float(ratio))
         if ratio >= -1e-12:
             return
-        negative = np.flatnonzero(lumped < -1e-12 * self.reference_mass)
+        count = int(np.count_nonzero(lumped < -1e-12 * self.reference_mass))
         self.steps_with_negative += 1
-        self.max_nodes = max(self.max_nodes, len(negative))
+        self.max_nodes = max(self.max_nodes, count)
         if self.first_step is None:
             self.first_step = step
+        if not self.applies or (self.policy != "error" and self.steps_with_negative > 1):
+            return  # nothing to say: the message is built only when it is raised or warned
+        negative = np.flatnonzero(lumped < -1e-12 * self.reference_mass)
         worst = negative[np.argmin(lumped[negative])]
         message = (
             f"step {step} (t = {time:.6g} s): negative grid mass at {len(negative)} node(s), "
