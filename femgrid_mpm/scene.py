@@ -35,7 +35,7 @@ from pydantic import (
 )
 
 from .bases import BASES
-from .effects import Gravity, MassDamping, PointLoad, Support
+from .effects import Contact, Gravity, MassDamping, PointLoad, Support
 from .expressions import compile_expression
 from .grid import MAX_NODES
 from .particles import count_rectangle
@@ -155,12 +155,6 @@ Load = Annotated[Union[PointLoad, Gravity], Field(discriminator="kind")]
 LOAD_KINDS = ("point", "gravity")
 
 
-class Contact(_Model):
-    """``[contact]``: how bodies meet.  ``"shared"``: one velocity field for all (the paper's)."""
-
-    kind: Literal["shared"] = "shared"
-
-
 class Output(_Model):
     """``[output]``: a record every ``every`` steps; ``energy`` bookkeeping; ``particles`` for ParaView."""
 
@@ -222,6 +216,8 @@ class Scene(_Model):
                 compile_expression(support.where, ("x", "y"))
             except ValueError as error:
                 raise ValueError(f"supports[{index}].where: {error}") from None
+        if self.contact is not None and self.contact.kind == "frictional" and self.solver.mass != "lumped":
+            raise ValueError("contact.kind: 'frictional' contact needs solver.mass = \"lumped\" (one lumped field per body)")
         return self
 
     def with_overrides(self, **changes) -> "Scene":

@@ -29,6 +29,7 @@ from .effects.base import Stage, StepContext
 from .energy import EnergyBookkeeping
 from .expressions import compile_expression
 from .grid import Grid
+from .fields import FieldLumpedMass, FieldTransfer
 from .kernels.engines import TRANSFERS
 from .mass import ConsistentMass, LumpedMass, SingularMassError, tensor_preconditioner
 from .materials import make_material
@@ -86,7 +87,9 @@ class Simulation:
             self.reference_mass, scene.solver.negative_mass, applies=scene.solver.mass == "lumped"
         )
         self.energy = EnergyBookkeeping() if scene.output and scene.output.energy else None
-        acting = [*scene.loads, *([scene.damping] if scene.damping else []), *scene.supports]
+        # contact before supports: both constrain the grid velocity, supports have the last word
+        contact = [scene.contact] if self.fields_per_body else []
+        acting = [*scene.loads, *([scene.damping] if scene.damping else []), *contact, *scene.supports]
         watching = [*([self.energy] if self.energy else []), *(observers or [])]
         self.effects: dict[Stage, list[tuple[str, Callable]]] = {stage: [] for stage in Stage}
         for effect in acting:
@@ -99,7 +102,7 @@ class Simulation:
         self.n_steps = int(np.ceil(scene.time.end / self.dt - 1e-9))
         for effect in watching:  # observers last: they may read dt and n_steps
             self.effects[effect.stage].append((effect.name, effect.bind(self)))
-        self.transfer = TRANSFERS[getattr(scene.solver, "engine", "numba")](self)
+        self.transfer = FieldTransfer(self) if self.fields_per_body else TRANSFERS[getattr(scene.solver, "engine", "numba")](self)
         self.context = self.transfer.context(self, self.dt)
         self.step_index = 0
         self.time = 0.0
@@ -132,8 +135,16 @@ class Simulation:
             )
         return Particles.concatenate(parts)
 
+    @property
+    def fields_per_body(self) -> bool:
+        """One grid velocity field per body: frictional contact."""
+        contact = self.scene.contact
+        return contact is not None and contact.kind == "frictional"
+
     def _mass_model(self):
         solver = self.scene.solver
+        if self.fields_per_body:
+            return FieldLumpedMass(self.grid.n_nodes, self.reference_mass, self.body_slices)
         if solver.mass == "lumped":
             return LumpedMass(self.grid.n_nodes, self.reference_mass)
         return ConsistentMass(
@@ -190,7 +201,8 @@ class Simulation:
             relative_momentum = self.transfer.to_grid(ctx, self.mass)
         except ValueError as error:
             raise self._stop(f"a particle left the grid: {error}", "particle_left_grid") from None
-        self.negative_mass.check(self.mass.lumped, ctx.step, ctx.time, self.grid.nodes)
+        for lumped in getattr(self.mass, "field_lumped", [self.mass.lumped]):  # each field divides by its own
+            self.negative_mass.check(lumped, ctx.step, ctx.time, self.grid.nodes)
         try:  # Eq. 17: v = M^-1 p_rel + v_ref, and the momentum p_rel + m v_ref
             ctx.momentum, ctx.velocity = self.mass.grid_velocity(relative_momentum, ctx.frame_velocity)
         except SingularMassError as error:

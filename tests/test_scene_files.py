@@ -103,7 +103,10 @@ BAD_SCENES = [
     ("load without kind", appended("[[loads]]\nacceleration = [0, -1]"), "loads[0].kind", "required key is missing"),
     ("unknown damping kind", appended("[damping]\nkind = 'rayleigh'\ncoefficient = 1.0"), "damping.kind", "rayleigh"),
     ("negative damping", appended("[damping]\nkind = 'mass'\ncoefficient = -1.0"), "damping.coefficient", "greater than or equal to 0"),
-    ("frictional contact (not yet)", appended("[contact]\nkind = 'frictional'"), "contact.kind", "must be 'shared'"),
+    ("unknown contact kind", appended("[contact]\nkind = 'sticky'"), "contact.kind", "'shared' or 'frictional'"),
+    ("negative friction", appended("[contact]\nkind = 'frictional'\nfriction = -0.1"), "contact.friction", "greater than or equal to 0"),
+    ("frictional contact with consistent mass", appended("[contact]\nkind = 'frictional'").replace('mass = "lumped"', 'mass = "consistent"'),
+     "contact.kind", "needs solver.mass"),
     ("unknown support component", appended("[[supports]]\nwhere = 'x <= 0'\nfix = ['z']"), "supports[0].fix[0]", "'x' or 'y'"),
     ("zero output interval", appended("[output]\nevery = 0"), "output.every", "greater than 0"),
     # loads on bodies that do not exist

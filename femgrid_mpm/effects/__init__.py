@@ -5,6 +5,7 @@ the protocol and the stages.
 """
 
 from .base import Stage, StepContext
+from .contact import Contact
 from .damping import MassDamping
 from .gravity import Gravity
 from .point_load import PointLoad
@@ -13,4 +14,4 @@ from .supports import Support
 LOADS = {"point": PointLoad, "gravity": Gravity}
 DAMPING = {"mass": MassDamping}
 
-__all__ = ["DAMPING", "LOADS", "Gravity", "MassDamping", "PointLoad", "Stage", "StepContext", "Support"]
+__all__ = ["Contact", "DAMPING", "LOADS", "Gravity", "MassDamping", "PointLoad", "Stage", "StepContext", "Support"]

@@ -85,13 +85,48 @@ class StepContext:
     def mass(self):
         return self.simulation.mass
 
+    #: grid gradient of each body's mass, sum m_p grad N, (n_bodies, n_nodes, 2):
+    #: contact normals (one field per body only)
+    mass_gradient: np.ndarray | None = None
+    #: with one velocity field per body (frictional contact): each body's
+    #: contiguous range of points; None for the single shared field
+    body_slices: list | None = None
+
     def add_force(self, name: str, grid_force: np.ndarray) -> None:
-        """Add a nodal force (N per unit thickness), shape (n_nodes, 2)."""
+        """Add a nodal force (N per unit thickness), shaped like ``force``:
+        (n_nodes, 2), or (n_bodies, n_nodes, 2) with one field per body."""
         self.force += grid_force
         if name in self.external:
             self.external[name] = self.external[name] + grid_force
         else:
             self.external[name] = grid_force
+
+    def add_point_forces(self, name: str, forces: np.ndarray, points: np.ndarray | None = None) -> None:
+        """Add forces acting on points, ``N.T @ forces``, to each point's own field.
+
+        Parameters
+        ----------
+        forces : ndarray, shape (n_points, 2) or (len(points), 2)
+            Force on each point (N per unit thickness).
+        points : ndarray of int, optional
+            The points the forces act on (all if omitted): for a few points
+            only their rows of ``N`` are touched.
+        """
+        N = self.N
+        n_nodes = N.shape[1]
+        fields = 1 if self.body_slices is None else len(self.body_slices)
+        grid_force = np.zeros((fields, n_nodes, 2))
+        if points is None:
+            ranges = [slice(0, N.shape[0])] if self.body_slices is None else self.body_slices
+            for field_index, members in enumerate(ranges):
+                grid_force[field_index] = N[members].T @ forces[members]
+        else:
+            body = self.particles.body
+            for point, force in zip(np.atleast_1d(points), np.atleast_2d(forces)):
+                start, stop = N.indptr[point], N.indptr[point + 1]
+                field_index = 0 if self.body_slices is None else body[point]
+                np.add.at(grid_force[field_index], N.indices[start:stop], np.outer(N.data[start:stop], force))
+        self.add_force(name, grid_force[0] if self.body_slices is None else grid_force)
 
 
 Action = Callable[[StepContext], None]

@@ -26,6 +26,6 @@ class Gravity:
         weight = simulation.particles.mass[:, None] * g  # constant: computed once
 
         def add_gravity(ctx: StepContext) -> None:
-            ctx.add_force(self.name, ctx.N.T @ weight)
+            ctx.add_point_forces(self.name, weight)
 
         return add_gravity

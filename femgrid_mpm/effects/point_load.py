@@ -54,14 +54,10 @@ class PointLoad:
         if self.model == "paper_eq35":
             force = force * particles.mass[point] / particles.mass[members].sum()
         self_name = f"{self.name}:{self.body}"
-        n_nodes = simulation.grid.n_nodes
 
         def add_point_load(ctx: StepContext) -> None:
             scale = 1.0 if self.ramp == 0 else min(1.0, ctx.time / self.ramp)
-            start, stop = ctx.N.indptr[point], ctx.N.indptr[point + 1]
-            grid_force = np.zeros((n_nodes, 2))
-            np.add.at(grid_force, ctx.N.indices[start:stop], np.outer(ctx.N.data[start:stop], scale * force))
-            ctx.add_force(self_name, grid_force)
+            ctx.add_point_forces(self_name, scale * force[None, :], points=np.array([point]))
 
         add_point_load.point = point  # type: ignore[attr-defined]
         add_point_load.applied_force = force  # type: ignore[attr-defined]

@@ -40,7 +40,7 @@ class Support:
         rows, columns = np.ix_(nodes, components)
 
         def fix_nodes(ctx: StepContext) -> None:
-            ctx.target[rows, columns] = 0.0
+            ctx.target[..., rows, columns] = 0.0  # every field, with one per body
 
         fix_nodes.nodes = nodes  # type: ignore[attr-defined]
         # known before any step, so that a coupled (consistent) mass solve can
