@@ -3,8 +3,8 @@
 ``femgrid-mpm reproduce`` runs them all; ``experiments/*.py`` run one each.
 """
 
-from . import vibrating_bar
+from . import box_impact, cantilever, vibrating_bar
 
-CASES = {"vibrating_bar": vibrating_bar.run}
+CASES = {"vibrating_bar": vibrating_bar.run, "cantilever": cantilever.run, "box_impact": box_impact.run}
 
 __all__ = ["CASES"]
