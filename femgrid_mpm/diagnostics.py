@@ -9,6 +9,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 
@@ -38,12 +39,15 @@ class NegativeMassMonitor:
 
     Parameters
     ----------
-    policy : {"error", "warn"}
-        Stop the run at the first negative mass, or record it and go on.
+    policy : {"error", "warn", "threshold"}
+        Stop the run at the first negative mass, record it and go on, or
+        record it and go on quietly because the mass model does not divide
+        by such masses (:class:`femgrid_mpm.mass.LumpedMass` ``threshold``);
+        then the nodes below the threshold are counted too
+        (:meth:`record_below_threshold`).
     applies : bool
-        False for consistent mass, whose matrix is positive semi-definite
-        whatever the row sums: negative row sums are still recorded but
-        never stop the run.
+        False for consistent and HRZ mass, which never divide by a row sum:
+        negative row sums are still recorded but never stop the run.
     """
 
     reference_mass: float
@@ -53,6 +57,9 @@ class NegativeMassMonitor:
     first_step: int | None = None
     min_ratio: float = field(default=np.inf)
     max_nodes: int = 0
+    steps_below_threshold: int = 0
+    first_step_below_threshold: int | None = None
+    max_below_threshold: int = 0
 
     def check(self, lumped: np.ndarray, step: int, time: float, nodes: np.ndarray) -> None:
         ratio = lumped.min() / self.reference_mass
@@ -64,7 +71,7 @@ class NegativeMassMonitor:
         self.max_nodes = max(self.max_nodes, count)
         if self.first_step is None:
             self.first_step = step
-        if not self.applies or (self.policy != "error" and self.steps_with_negative > 1):
+        if not self.applies or self.policy == "threshold" or (self.policy != "error" and self.steps_with_negative > 1):
             return  # nothing to say: the message is built only when it is raised or warned
         negative = np.flatnonzero(lumped < -1e-12 * self.reference_mass)
         worst = negative[np.argmin(lumped[negative])]
@@ -80,10 +87,92 @@ class NegativeMassMonitor:
         if self.steps_with_negative == 1:
             warnings.warn(message + " (policy 'warn': going on)", NegativeMassWarning, stacklevel=3)
 
+    def record_below_threshold(self, count: int, step: int) -> None:
+        """Count the nodes below the mass threshold at ``step``."""
+        if count:
+            self.steps_below_threshold += 1
+            self.max_below_threshold = max(self.max_below_threshold, count)
+            if self.first_step_below_threshold is None:
+                self.first_step_below_threshold = step
+
     def summary(self) -> dict:
-        return {
+        summary = {
             "steps_with_negative_mass": self.steps_with_negative,
             "first_step": self.first_step,
             "min_mass_ratio": None if not np.isfinite(self.min_ratio) else self.min_ratio,
             "max_negative_nodes": self.max_nodes,
         }
+        if self.policy == "threshold":
+            summary.update(
+                steps_below_threshold=self.steps_below_threshold,
+                first_step_below_threshold=self.first_step_below_threshold,
+                max_nodes_below_threshold=self.max_below_threshold,
+            )
+        return summary
+
+    def state(self) -> dict:
+        """The counters, for a checkpoint (:meth:`restore` takes them back)."""
+        return {name: getattr(self, name) for name in _MONITOR_COUNTERS}
+
+    def restore(self, state: dict) -> None:
+        for name in _MONITOR_COUNTERS:
+            setattr(self, name, state[name])
+
+
+_MONITOR_COUNTERS = ("steps_with_negative", "first_step", "min_ratio", "max_nodes",
+                     "steps_below_threshold", "first_step_below_threshold", "max_below_threshold")
+
+
+@dataclass
+class EnergyGuard:
+    """Stops a run whose energy runs away (an unstable time step, a blow-up).
+
+    The run stops when its energy exceeds ``factor * (initial + sum |W_k| +
+    floor)``: ``initial`` the total energy (kinetic + strain) at the start,
+    ``W_k`` the work done so far by each declared force (loads, damping,
+    contact; their absolute values, so that work going in and out cannot
+    cancel), and ``floor`` a small energy that keeps bodies starting at rest
+    from tripping on round-off.  A stable run stays within a few percent of
+    its energy balance; an unstable mode grows by orders of magnitude per
+    step, so it is caught well before the state overflows to NaN.
+
+    Checked on what is cheap, every step: the ``total`` of the step's
+    energy record (when ``[output] energy`` is declared and the step is
+    recorded), else the points' kinetic energy, which alone cannot exceed the
+    bound in a run that keeps its energy balance (one compiled pass over the
+    points, :func:`points_kinetic_energy`: ~0.8 ns per point, 1% of a lumped
+    step).  Every step, because an unstable step grows the energy ~1000-fold
+    per step at 3x the critical one: its points leave the grid within 4
+    steps.
+    """
+
+    initial: float
+    floor: float
+    factor: float = 10.0
+
+    def bound(self, work: dict) -> float:
+        """The energy (J per unit thickness) above which the run has run away."""
+        return self.factor * (self.initial + sum(abs(w) for w in work.values()) + self.floor)
+
+    def check(self, energy: float, what: str, work: dict, step: int, time: float) -> None:
+        """Raise :class:`SimulationStopped` (reason ``runaway_energy``) if ``energy`` is above the bound."""
+        bound = self.bound(work)
+        if not energy > bound:  # also NaN: the finiteness check names that
+            return
+        external = sum(abs(w) for w in work.values())
+        raise SimulationStopped(
+            f"step {step} (t = {time:.6g} s): the energy ran away: {what} {energy:.6g} J/m exceeds "
+            f"{self.factor:g} x (initial total {self.initial:.6g} + |external work| {external:.6g} + floor "
+            f"{self.floor:.3g}) = {bound:.6g} J/m (a time step above the critical one, or an unstable model)",
+            step, time, "runaway_energy",
+        )
+
+
+@numba.njit(cache=True)
+def points_kinetic_energy(mass: np.ndarray, velocity: np.ndarray) -> float:
+    """``1/2 sum m_p v_p.v_p`` in one compiled pass (for the guard; the energy
+    records use :func:`femgrid_mpm.energy.kinetic_energy`)."""
+    total = 0.0
+    for p in range(mass.shape[0]):
+        total += mass[p] * (velocity[p, 0] * velocity[p, 0] + velocity[p, 1] * velocity[p, 1])
+    return 0.5 * total

@@ -45,23 +45,29 @@ def kinetic_energy(mass: np.ndarray, velocity: np.ndarray) -> float:
 
 @dataclass
 class EnergyBookkeeping:
-    """Records one row of :data:`COLUMNS` per record step."""
+    """Records one row of :data:`COLUMNS` per record step.
+
+    ``initial`` holds the first record's kinetic, grid kinetic and strain
+    energies and work (the ``d`` of every row is measured from them); with
+    ``rows`` it is the whole state, which :meth:`state` and :meth:`restore`
+    carry through a checkpoint.
+    """
 
     sink: Callable[[dict], None] | None = None
     rows: list[dict] = field(default_factory=list)
+    initial: dict[str, float] = field(default_factory=dict)
 
     name = "energy"
     stage = Stage.OBSERVE
 
     def bind(self, simulation):
-        initial: dict[str, float] = {}
-
         def record_energy(ctx: StepContext) -> None:
             particles = ctx.particles
             kinetic = kinetic_energy(particles.mass, particles.v)
             grid = 0.5 * float(np.sum(ctx.velocity * ctx.mass.apply(ctx.velocity)))
             strain = ctx.simulation.strain_energy()
             work = float(sum(ctx.work.values()))
+            initial = self.initial
             if not initial:
                 initial.update(kinetic=kinetic, grid=grid, strain=strain, work=work)
             d_kinetic = kinetic - initial["kinetic"]
@@ -88,3 +94,15 @@ class EnergyBookkeeping:
     def table(self) -> dict[str, np.ndarray]:
         """The records as arrays, one per column."""
         return {name: np.array([row[name] for row in self.rows]) for name in COLUMNS}
+
+    def state(self) -> tuple[dict, np.ndarray]:
+        """``(initial, rows)``: the first record's values and every row so far,
+        shape (records, len(COLUMNS)), for a checkpoint."""
+        rows = np.array([[row[name] for name in COLUMNS] for row in self.rows], dtype=float).reshape(-1, len(COLUMNS))
+        return dict(self.initial), rows
+
+    def restore(self, initial: dict, rows: np.ndarray) -> None:
+        """Take back :meth:`state` (the sink is not called: its owner restores its own)."""
+        self.initial.clear()
+        self.initial.update({name: float(value) for name, value in initial.items()})
+        self.rows[:] = [{name: float(value) for name, value in zip(COLUMNS, row)} for row in rows]

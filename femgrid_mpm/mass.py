@@ -67,31 +67,94 @@ class LumpedMass:
     reference_mass : float
         Mass of one full lattice cell (kg); masses with ``|m_i|`` below
         ``1e-12 * reference_mass`` count as empty.
+    threshold : float, optional
+        The ``negative_mass = "threshold"`` remedy: at a node whose volume
+        fraction ``(N.T @ V_p)_i / integral(phi_i)`` is below this (every
+        negative mass among them) both solves divide by the absolute mass
+        ``sum_p m_p |N_ip|`` instead of the row sum (see :meth:`_replace`).
+        None: no remedy.
+    node_integrals : ndarray, shape (n_nodes,), optional
+        ``integral(phi_i)`` (m^2), the full share of each node; needed with
+        ``threshold`` and must be positive (not serendipity's corners).
     """
 
     n_nodes: int
     reference_mass: float
+    threshold: float | None = None
+    node_integrals: np.ndarray | None = field(default=None, repr=False)
     kind = "lumped"
     lumped: np.ndarray = field(init=False, repr=False)
     active: np.ndarray = field(init=False, repr=False)
+    #: nodes below the threshold at the last assembly
+    nodes_below_threshold: int = field(default=0, init=False)
+
+    def __post_init__(self):
+        if self.threshold is not None:
+            if self.node_integrals is None or not np.all(self.node_integrals > 0):
+                raise ValueError(
+                    "the mass threshold needs a positive full share integral(phi_i) at every node; "
+                    "serendipity's corner functions integrate to -1/12 of each element, so no relative "
+                    "threshold applies (use solver.mass = 'hrz')"
+                )
+
+    @property
+    def needs_volume(self) -> bool:
+        """Whether :meth:`assemble_sums` wants ``N.T @ V_p`` (the threshold does)."""
+        return self.threshold is not None
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
         self.lumped = N.T @ m_p
-        self.active = _active(N, m_p, self.lumped, self.reference_mass)
+        absolute = _absolute_mass(N, m_p, self.lumped)
+        self.active = (np.abs(self.lumped) > 1e-6 * absolute) & (absolute > 1e-12 * self.reference_mass)
         self._inverse = np.divide(1.0, self.lumped, out=np.zeros(self.n_nodes), where=self.active)
+        self._replace(absolute, None if volume_p is None or self.threshold is None else N.T @ volume_p)
 
     def assemble_sums(self, lumped: np.ndarray, absolute: np.ndarray | None, volume: np.ndarray | None = None) -> None:
-        """The same from sums the compiled P2G made: ``N.T @ m_p`` and (signed
-        bases) ``|N|.T @ m_p``.  The arrays are kept, not copied."""
+        """The same from sums the compiled P2G made: ``N.T @ m_p``, (signed
+        bases) ``|N|.T @ m_p`` and (threshold) ``N.T @ V_p``.  The arrays are
+        kept, not copied."""
         if getattr(self, "_inverse", None) is None or len(self._inverse) != len(lumped):
             self._inverse = np.zeros(len(lumped))
             self.active = np.zeros(len(lumped), dtype=bool)
         self.lumped = lumped
-        _lumped_inverse(lumped, lumped if absolute is None else absolute, self.reference_mass, self._inverse, self.active)
+        absolute = lumped if absolute is None else absolute
+        _lumped_inverse(lumped, absolute, self.reference_mass, self._inverse, self.active)
+        self._replace(absolute, volume)
+
+    def _replace(self, absolute: np.ndarray, volume: np.ndarray | None) -> None:
+        """The threshold: below it, divide by the absolute mass ``sum_p m_p |N_ip|``.
+
+        That is the mass the node would have if no shape function were
+        negative: positive, and never smaller than the share of any point.
+        Velocity and acceleration divide by the same mass, which keeps the
+        step's energy balance: the power the points' kinetic energy gains,
+        ``sum_i a_i . p_i``, equals the power of the internal forces,
+        ``sum_i f_i . v_i``, only if ``a_i = f_i / d_i`` and ``v_i = p_i /
+        d_i`` with one ``d_i`` (zeroing the acceleration at a node whose
+        velocity still strains the points injects ``-f_i . v_i``: measured,
+        the q2 bar ending inside an element gained 85% of its energy in 1 s,
+        at any time step).  Momentum is not exact there:
+        ``sum_i m_i a_i - sum_i f_i = sum (m_i / d_i - 1) f_i`` over these
+        nodes.  For q1 and splines ``|N| = N``: nothing changes.
+        """
+        self.nodes_below_threshold = 0
+        if self.threshold is None:
+            return
+        if volume is None:
+            raise ValueError("the mass threshold needs the nodal volumes N.T @ V_p")
+        below = (absolute > 1e-12 * self.reference_mass) & (volume < self.threshold * self.node_integrals)
+        self.nodes_below_threshold = int(np.count_nonzero(below))
+        if self.nodes_below_threshold:
+            self._inverse[below] = 1.0 / absolute[below]
+            self.active |= below
 
     def solve(self, rhs: np.ndarray, kind: str = "velocity") -> np.ndarray:
         """``rhs / m_i`` on active nodes, zero elsewhere; rhs shape (n_nodes, 2)."""
         return rhs * self._inverse[:, None]
+
+    def inverses(self) -> tuple[np.ndarray, np.ndarray]:
+        """The diagonal inverses ``(velocity, acceleration)`` of the last assembly."""
+        return self._inverse, self._inverse
 
     def grid_velocity(self, relative_momentum: np.ndarray, frame_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 17 in the frame moving with ``frame_velocity``: ``(p, v)``, the momentum
@@ -103,6 +166,87 @@ class LumpedMass:
     def apply(self, vector: np.ndarray) -> np.ndarray:
         """``M @ vector`` with the lumped matrix."""
         return vector * self.lumped[:, None]
+
+
+def positive_weights(N: sp.csr_matrix) -> sp.csr_matrix:
+    """``W_ip = N_ip^2 / sum_j N_jp^2``: each point's HRZ weights.
+
+    Non-negative and a partition of unity (each row sums to one), on N's
+    structure.  They lump each point's own mass matrix ``m_p N_p N_p^T``
+    by HRZ (its diagonal, scaled to the point's mass), the way FEM lumps an
+    element's.
+    """
+    squares = N.data * N.data
+    rows = np.repeat(np.arange(N.shape[0]), np.diff(N.indptr))
+    totals = np.bincount(rows, weights=squares, minlength=N.shape[0])
+    return sp.csr_matrix((squares / totals[rows], N.indices.copy(), N.indptr.copy()), shape=N.shape)
+
+
+@dataclass
+class HrzMass:
+    """HRZ (Hinton-Rock-Zienkiewicz) lumping per point: a positive diagonal mass
+    for every basis, and the transfers that go with it.
+
+    Row sums of q2 and serendipity functions can be negative (serendipity's
+    corners always are), and dividing by them breaks the run.  HRZ lumps
+    each point's rank-one mass matrix ``m_p N_p N_p^T`` to its diagonal
+    scaled to ``m_p``: the weights ``W_ip = N_ip^2 / sum_j N_jp^2``
+    (:func:`positive_weights`) are non-negative and sum to one at every
+    point, and ``m_i = sum_p m_p W_ip > 0``.
+
+    One diagonal mass must go with one transfer, or momentum and uniform
+    motion are lost: with ``m_i = M_ii sum m / sum M_jj`` (HRZ over the whole
+    grid) and the usual ``v_p += dt N @ a``, momentum changes by
+    ``dt sum_i (m_i^L / m_i) f_i != 0`` and a body in free fall does not
+    fall at ``g`` where ``m^L`` and ``m`` differ.  So ``W`` carries
+    everything that goes between points and grid as mass or momentum: P2G
+    momentum ``W.T @ (m_p v_p)`` (``v_i`` a weighted average of the points,
+    rigid motion exact), point forces (gravity and point loads,
+    :meth:`femgrid_mpm.effects.base.StepContext.add_point_forces`) and the
+    G2P velocity increment ``v_p += dt W @ a``.  Gradients (strain rate,
+    internal force) and positions keep the basis's own ``N``: the material
+    still deforms with the element's interpolation.  Then momentum is exact
+    (``sum_i m_i a_i = sum_i f_i``), internal forces do no net work on
+    rigid motion, and free fall is exact.
+
+    ``lumped`` keeps the row sums ``N.T @ m_p`` for the negative-mass
+    record; ``diagonal`` is the mass used.
+    """
+
+    n_nodes: int
+    reference_mass: float
+    kind = "hrz"
+    #: the engine builds N and calls :meth:`assemble`; transfers use ``weights``
+    needs_matrices = True
+    weights: sp.csr_matrix | None = field(default=None, init=False, repr=False)
+
+    def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
+        self.lumped = N.T @ m_p
+        self.weights = positive_weights(N)
+        self.diagonal = self.weights.T @ m_p
+        # no cancellation here (W >= 0): every node a point touches can be divided by.  A
+        # cut-off like the row sums' 1e-12 would drop forces where W = N^2 is tiny and
+        # grad N is not (cubic splines: a momentum leak of 1e-8 over the drifting bar)
+        self.active = self.diagonal > 0.0
+        self._inverse = np.divide(1.0, self.diagonal, out=np.zeros(self.n_nodes), where=self.active)
+
+    def solve(self, rhs: np.ndarray, kind: str = "velocity") -> np.ndarray:
+        """``rhs / m_i`` on active nodes, zero elsewhere."""
+        return rhs * self._inverse[:, None]
+
+    def inverses(self) -> tuple[np.ndarray, np.ndarray]:
+        """The diagonal inverses ``(velocity, acceleration)`` (equal)."""
+        return self._inverse, self._inverse
+
+    def grid_velocity(self, relative_momentum: np.ndarray, frame_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. 17 with the HRZ mass, in the frame of ``frame_velocity``."""
+        momentum, velocity = np.empty_like(relative_momentum), np.empty_like(relative_momentum)
+        _lumped_velocity(relative_momentum, self._inverse, self.diagonal, frame_velocity, momentum, velocity)
+        return momentum, velocity
+
+    def apply(self, vector: np.ndarray) -> np.ndarray:
+        """``M @ vector`` with the HRZ diagonal."""
+        return vector * self.diagonal[:, None]
 
 
 @dataclass
@@ -153,6 +297,22 @@ class ConsistentMass:
     def __post_init__(self):
         self._previous: dict[str, tuple] = {}
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
+
+    def state(self) -> tuple[dict, dict]:
+        """What carries from step to step, ``(arrays, values)``: CG's warm-start
+        history (the last two solutions of each kind) and the counters."""
+        arrays = {f"previous.{kind}.{index}": solution
+                  for kind, history in self._previous.items() for index, solution in enumerate(history)}
+        values = {"iterations": self.iterations, "weak_nodes": self.weak_nodes, "blended_steps": self.blended_steps,
+                  "previous": {kind: len(history) for kind, history in self._previous.items()}}
+        return arrays, values
+
+    def restore(self, arrays: dict, values: dict) -> None:
+        """Take back :meth:`state`."""
+        self.iterations, self.weak_nodes = int(values["iterations"]), int(values["weak_nodes"])
+        self.blended_steps = int(values["blended_steps"])
+        self._previous = {kind: tuple(np.array(arrays[f"previous.{kind}.{index}"]) for index in range(count))
+                          for kind, count in values["previous"].items()}
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
         weighted = N.multiply(m_p[:, None]).tocsr()
@@ -358,11 +518,16 @@ def _active(N: sp.csr_matrix, m_p: np.ndarray, lumped: np.ndarray, reference_mas
     node whose mass is below 1e-6 of its absolute mass ``sum m_p |N_ip|``
     is not active either (its solution is zero, as for empty nodes).
     """
-    if N.data.min(initial=0.0) >= 0.0:
-        absolute = lumped
-    else:  # a matrix of |N| on N's index arrays, for a transposed product only
-        absolute = sp.csr_matrix((np.abs(N.data), N.indices, N.indptr), shape=N.shape).T @ m_p
+    absolute = _absolute_mass(N, m_p, lumped)
     return (np.abs(lumped) > 1e-6 * absolute) & (absolute > 1e-12 * reference_mass)
+
+
+def _absolute_mass(N: sp.csr_matrix, m_p: np.ndarray, lumped: np.ndarray) -> np.ndarray:
+    """``|N|.T @ m_p``: the lumped mass itself for non-negative bases."""
+    if N.data.min(initial=0.0) >= 0.0:
+        return lumped
+    # a matrix of |N| on N's index arrays, for a transposed product only
+    return sp.csr_matrix((np.abs(N.data), N.indices, N.indptr), shape=N.shape).T @ m_p
 
 
 @numba.njit(cache=True)

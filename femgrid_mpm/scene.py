@@ -83,8 +83,13 @@ class TimeSpec(_Model):
 class SolverSpec(_Model):
     """``[solver]``: mass kind and what to do when masses misbehave.
 
-    ``negative_mass``: ``"error"`` stops the run at the first negative
-    lumped grid mass, ``"warn"`` records it and goes on.
+    ``mass``: ``"lumped"`` (row sums), ``"consistent"`` or ``"hrz"`` (a
+    positive diagonal for every basis, :class:`femgrid_mpm.mass.HrzMass`).
+    ``negative_mass`` (lumped mass): ``"error"`` stops the run at the first
+    negative lumped grid mass, ``"warn"`` records it and goes on,
+    ``"threshold"`` records it and, at every node whose volume fraction is
+    below ``mass_threshold``, divides by the absolute mass ``sum m_p |N_ip|``
+    instead (see :class:`femgrid_mpm.mass.LumpedMass`).
     ``consistent_fallback``: ``"error"`` or ``"blend"`` when the consistent
     mass matrix is singular (see :mod:`femgrid_mpm.mass`), with ``blend``
     the lumped weight; ``weak_fraction`` the volume fraction under which a
@@ -92,8 +97,10 @@ class SolverSpec(_Model):
     the implementation of the step's transfers (:mod:`femgrid_mpm.kernels`).
     """
 
-    mass: Literal["lumped", "consistent"] = "lumped"
-    negative_mass: Literal["error", "warn"] = "error"
+    mass: Literal["lumped", "consistent", "hrz"] = "lumped"
+    negative_mass: Literal["error", "warn", "threshold"] = "error"
+    #: negative_mass = "threshold": below this fraction of a node's full share, its absolute mass is used
+    mass_threshold: Annotated[float, Field(ge=0, lt=1)] = 0.01
     consistent_fallback: Literal["error", "blend"] = "error"
     blend: Annotated[float, Field(gt=0, le=1)] = 0.1
     weak_fraction: Annotated[float, Field(ge=0, lt=1)] = 0.01
@@ -218,6 +225,15 @@ class Scene(_Model):
                 raise ValueError(f"supports[{index}].where: {error}") from None
         if self.contact is not None and self.contact.kind == "frictional" and self.solver.mass != "lumped":
             raise ValueError("contact.kind: 'frictional' contact needs solver.mass = \"lumped\" (one lumped field per body)")
+        if self.solver.negative_mass == "threshold" and self.solver.mass == "lumped":
+            if self.grid.basis == "serendipity":
+                raise ValueError(
+                    "solver.negative_mass: 'threshold' cannot help serendipity: its corner functions integrate to "
+                    "-1/12 of each element, so a full share is negative and no fraction of it is a threshold; "
+                    "use solver.mass = \"hrz\""
+                )
+            if self.contact is not None and self.contact.kind == "frictional":
+                raise ValueError("solver.negative_mass: 'threshold' is implemented for one shared field, not for 'frictional' contact")
         return self
 
     def with_overrides(self, **changes) -> "Scene":

@@ -24,14 +24,14 @@ from typing import Callable
 
 import numpy as np
 
-from .diagnostics import NegativeMassMonitor, SimulationStopped
+from .diagnostics import EnergyGuard, NegativeMassMonitor, SimulationStopped, points_kinetic_energy
 from .effects.base import Stage, StepContext
-from .energy import EnergyBookkeeping
+from .energy import EnergyBookkeeping, kinetic_energy
 from .expressions import compile_expression
 from .grid import Grid
 from .fields import FieldLumpedMass, FieldTransfer
 from .kernels.engines import TRANSFERS
-from .mass import ConsistentMass, LumpedMass, SingularMassError, tensor_preconditioner
+from .mass import ConsistentMass, HrzMass, LumpedMass, SingularMassError, tensor_preconditioner
 from .materials import make_material
 from .particles import Particles, seed_rectangle
 from .scene import Scene
@@ -107,6 +107,13 @@ class Simulation:
         self.step_index = 0
         self.time = 0.0
         self.wall_time = 0.0
+        # a floor of 1e-9 x sum E V: the strain energy of a strain ~4.5e-5 throughout every body
+        stiffness_volume = sum(body.material.E * float(self.particles.volume[members].sum())
+                               for body, members in zip(scene.bodies, self.body_slices))
+        self.energy_guard = EnergyGuard(
+            initial=kinetic_energy(self.particles.mass, self.particles.v) + self.strain_energy(),
+            floor=1e-9 * stiffness_volume,
+        )
 
     # -- set-up -----------------------------------------------------------------
 
@@ -145,7 +152,12 @@ class Simulation:
         solver = self.scene.solver
         if self.fields_per_body:
             return FieldLumpedMass(self.grid.n_nodes, self.reference_mass, self.body_slices)
+        if solver.mass == "hrz":
+            return HrzMass(self.grid.n_nodes, self.reference_mass)
         if solver.mass == "lumped":
+            if solver.negative_mass == "threshold":
+                return LumpedMass(self.grid.n_nodes, self.reference_mass, threshold=solver.mass_threshold,
+                                  node_integrals=self.grid.node_integrals)
             return LumpedMass(self.grid.n_nodes, self.reference_mass)
         return ConsistentMass(
             self.grid.n_nodes,
@@ -203,6 +215,7 @@ class Simulation:
             raise self._stop(f"a particle left the grid: {error}", "particle_left_grid") from None
         for lumped in getattr(self.mass, "field_lumped", [self.mass.lumped]):  # each field divides by its own
             self.negative_mass.check(lumped, ctx.step, ctx.time, self.grid.nodes)
+        self.negative_mass.record_below_threshold(getattr(self.mass, "nodes_below_threshold", 0), ctx.step)
         try:  # Eq. 17: v = M^-1 p_rel + v_ref, and the momentum p_rel + m v_ref
             ctx.momentum, ctx.velocity = self.mass.grid_velocity(relative_momentum, ctx.frame_velocity)
         except SingularMassError as error:
@@ -215,6 +228,7 @@ class Simulation:
         ctx, p, dt = self.project(), self.particles, self.dt
         if record:
             self._run(Stage.OBSERVE)
+        self._guard_energy(record)
         # 4-7: strain increment from the grid velocity (Eq. 18), stress (Eq. 6), internal
         # force -(dNdx.T @ V sigma_x + dNdy.T @ V sigma_y) with the volumes of time t (Eq. 11)
         ctx.force = self.transfer.internal_force(ctx, dt, self.materials, self.body_slices)
@@ -232,6 +246,16 @@ class Simulation:
         self.time = self.step_index * dt
         if not np.isfinite(checksum):
             raise self._stop("the state is no longer finite (NaN or Inf)", "not_finite")
+
+    def _guard_energy(self, recorded: bool) -> None:
+        """The runaway-energy guard (:class:`EnergyGuard`) on what is known cheaply:
+        the total of this step's energy record, else the points' kinetic energy."""
+        guard, ctx = self.energy_guard, self.context
+        if recorded and self.energy is not None and self.energy.rows:
+            guard.check(self.energy.rows[-1]["total"], "the total energy", ctx.work, self.step_index, self.time)
+        else:
+            kinetic = points_kinetic_energy(self.particles.mass, self.particles.v)
+            guard.check(kinetic, "the kinetic energy", ctx.work, self.step_index, self.time)
 
     def _solve(self, rhs: np.ndarray, kind: str) -> np.ndarray:
         try:
@@ -261,8 +285,24 @@ class Simulation:
 
     # -- running ---------------------------------------------------------------
 
-    def run(self, progress: Callable[[int, float], None] | None = None) -> RunResult:
+    def run(
+        self,
+        progress: Callable[[int, float], None] | None = None,
+        checkpoint: Callable[["Simulation"], None] | None = None,
+        checkpoint_every: int = 0,
+    ) -> RunResult:
         """Step to the end time, recording every ``output.every`` steps.
+
+        Parameters
+        ----------
+        progress : callable, optional
+            Called with ``(step, time)`` after every step.
+        checkpoint : callable, optional
+            Called with the simulation between steps, every
+            ``checkpoint_every`` steps, when the run goes on (not after its
+            last step): the state is then complete (see :meth:`state`), and
+            a run continued from it (:meth:`restore`, then :meth:`run`)
+            repeats this one bit for bit.
 
         Raises
         ------
@@ -271,6 +311,7 @@ class Simulation:
             the state up to that step.
         """
         start = clock.perf_counter()
+        self._run_started = start
         ending = "reached t = {time:.6g} s"
         try:
             while self.step_index < self.n_steps:
@@ -280,6 +321,9 @@ class Simulation:
                 if self._at_rest():
                     ending = "at rest at t = {time:.6g} s (no point faster than time.rest_speed)"
                     break
+                if checkpoint is not None and checkpoint_every and self.step_index % checkpoint_every == 0 \
+                        and self.step_index < self.n_steps:
+                    checkpoint(self)
             if self.every:
                 self.project()
                 self._run(Stage.OBSERVE)
@@ -301,9 +345,71 @@ class Simulation:
         rest_speed = self.scene.time.rest_speed
         if rest_speed is None or self.time < self.scene.time.rest_after:
             return False
-        lumped = np.maximum(self.mass.lumped, 0.0)
+        lumped = np.maximum(getattr(self.mass, "diagonal", self.mass.lumped), 0.0)
         mean_square = np.sum(lumped[:, None] * self.context.velocity**2) / np.sum(lumped)
         return bool(np.sqrt(mean_square) < rest_speed)
+
+    # -- state, for checkpoints -------------------------------------------------
+
+    def state(self) -> tuple[dict, dict]:
+        """Everything that carries from one step to the next, as ``(arrays, values)``:
+        numpy arrays, and plain JSON values (numbers keep every bit through
+        ``repr``).
+
+        The points (every array of :class:`Particles`), the step, the work
+        ledger (in its order: the energy sums it in that order), the energy
+        records and their initial values, the runaway guard's bound, the
+        negative-mass counters and the mass model's own history (CG's warm
+        start).  Everything else is rebuilt from the scene, or recomputed
+        from these at every step.
+        """
+        p = self.particles
+        arrays = {f"particles.{name}": getattr(p, name) for name in p.__dataclass_fields__}
+        values = {
+            "step": self.step_index,
+            "time": self.time,
+            "dt": self.dt,
+            "wall_time": self.wall_time + (clock.perf_counter() - self._run_started if hasattr(self, "_run_started") else 0.0),
+            "work": [[name, value] for name, value in self.context.work.items()],
+            "energy_guard": {"initial": self.energy_guard.initial, "floor": self.energy_guard.floor},
+            "negative_mass": self.negative_mass.state(),
+        }
+        if self.energy is not None:
+            values["energy_initial"], arrays["energy.rows"] = self.energy.state()
+        if hasattr(self.mass, "state"):
+            mass_arrays, values["mass"] = self.mass.state()
+            arrays.update({f"mass.{name}": array for name, array in mass_arrays.items()})
+        return arrays, values
+
+    def restore(self, arrays: dict, values: dict) -> None:
+        """Take back :meth:`state` into a simulation built from the same scene.
+
+        Raises
+        ------
+        ValueError
+            If the state does not fit this simulation (another scene).
+        """
+        p = self.particles
+        for name in p.__dataclass_fields__:
+            saved = np.asarray(arrays[f"particles.{name}"])
+            current = getattr(p, name)
+            if saved.shape != current.shape or saved.dtype != current.dtype:
+                raise ValueError(f"particles.{name}: shape {saved.shape} {saved.dtype}, this scene has {current.shape} {current.dtype}")
+            np.copyto(current, saved)  # in place: effects and engines may hold the arrays
+        if values["dt"] != self.dt:
+            raise ValueError(f"dt {values['dt']!r} s, this scene has {self.dt!r} s")
+        self.step_index, self.time = int(values["step"]), float(values["time"])
+        self.wall_time = float(values["wall_time"])
+        self.context.work.clear()
+        self.context.work.update((str(name), float(value)) for name, value in values["work"])
+        self.energy_guard.initial = float(values["energy_guard"]["initial"])
+        self.energy_guard.floor = float(values["energy_guard"]["floor"])
+        self.negative_mass.restore(values["negative_mass"])
+        if self.energy is not None:
+            self.energy.restore(values["energy_initial"], arrays["energy.rows"])
+        if hasattr(self.mass, "restore"):
+            prefix = "mass."
+            self.mass.restore({k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}, values["mass"])
 
     def result(self, status: str, message: str) -> RunResult:
         scene = self.scene

@@ -91,18 +91,21 @@ def largest_frequency_squared(stiffness: sp.csr_matrix, mass: sp.spmatrix) -> fl
 
 
 def largest_eigenvalue_of_product(inverse_mass: sp.csr_matrix, stiffness: sp.csr_matrix) -> float:
-    """Largest eigenvalue of ``B K`` for symmetric positive semi-definite B and K.
+    """Largest modulus of the eigenvalues of ``B K``.
 
-    Such a product has real, non-negative eigenvalues (it is similar to
-    ``K^1/2 B K^1/2``), so the largest in modulus is the largest.
+    For symmetric positive semi-definite B and K the eigenvalues are real
+    and non-negative (the product is similar to ``K^1/2 B K^1/2``), so this
+    is the largest.  A B that is not symmetric (velocity and acceleration
+    divided by different masses) can have complex ones; their modulus is
+    what bounds the step.
     """
     n = stiffness.shape[0]
     if n == 0:
         return 0.0
     if n <= 1500:
-        return float(np.max(np.linalg.eigvals(inverse_mass.toarray() @ stiffness.toarray()).real))
+        return float(np.max(np.abs(np.linalg.eigvals(inverse_mass.toarray() @ stiffness.toarray()))))
     operator = spla.LinearOperator((n, n), matvec=lambda x: inverse_mass @ (stiffness @ x), dtype=float)
-    return float(np.max(spla.eigs(operator, k=1, which="LM", tol=1e-4, return_eigenvectors=False).real))
+    return float(np.max(np.abs(spla.eigs(operator, k=1, which="LM", tol=1e-4, return_eigenvectors=False))))
 
 
 def critical_time_step(simulation) -> float:
@@ -118,6 +121,13 @@ def critical_time_step(simulation) -> float:
     serendipity element with row-sum lumping, whose corner masses are
     negative, runs at all (the paper's "self-restoration").  Consistent mass:
     ``M_C^-1 M_C M_C^-1 = M_C^-1``, the textbook case.
+
+    The same holds for any diagonal mass with its own transfer weights W
+    (HRZ, :class:`femgrid_mpm.mass.HrzMass`): ``M^-1 W^T diag(m) W M^-1``,
+    and for the mass threshold, whose diagonal holds absolute masses at the
+    nodes below it.  (A mass model whose velocity and acceleration divided
+    by different diagonals would give ``D_v^-1 M_C D_a^-1``, not symmetric:
+    :meth:`inverses` returns both.)
     """
     grid, p, mass_model = simulation.grid, simulation.particles, simulation.mass
     N, dNdx, dNdy = grid.shape_functions(p.x)
@@ -133,10 +143,17 @@ def critical_time_step(simulation) -> float:
         free &= ~fixed.ravel()
     stiffness = stiffness[free][:, free]
     try:
-        if mass_model.kind == "lumped":
-            inverse = sp.diags(np.divide(1.0, mass_model.lumped, out=np.zeros(grid.n_nodes), where=mass_model.active))
-            consistent = (N.T @ N.multiply(p.mass[:, None]).tocsr()).tocsr()
-            effective = sp.kron(inverse @ consistent @ inverse, sp.identity(2), format="csr")[free][:, free]
+        if mass_model.kind in ("lumped", "hrz"):  # diagonal: row sums (and the threshold's), or HRZ
+            if hasattr(mass_model, "inverses"):
+                velocity_inverse, acceleration_inverse = (sp.diags(inverse) for inverse in mass_model.inverses())
+            else:  # one field per body (frictional contact): the shared field's estimate
+                velocity_inverse = acceleration_inverse = sp.diags(
+                    np.divide(1.0, mass_model.lumped, out=np.zeros(grid.n_nodes), where=mass_model.active))
+            weights = getattr(mass_model, "weights", None)
+            transfer = N if weights is None else weights
+            consistent = (transfer.T @ transfer.multiply(p.mass[:, None]).tocsr()).tocsr()
+            effective = velocity_inverse @ consistent @ acceleration_inverse
+            effective = sp.kron(effective, sp.identity(2), format="csr")[free][:, free]
             omega_squared = largest_eigenvalue_of_product(effective, stiffness)
         else:
             mass = sp.kron(mass_model.matrix, sp.identity(2), format="csr")[free][:, free]

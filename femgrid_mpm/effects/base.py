@@ -85,6 +85,15 @@ class StepContext:
     def mass(self):
         return self.simulation.mass
 
+    @property
+    def transfer_weights(self):
+        """What carries mass, momentum and point forces between points and grid:
+        ``N``, or the mass model's own non-negative weights (``mass = "hrz"``,
+        :class:`femgrid_mpm.mass.HrzMass`), so that a force on a point acts on the
+        grid as the point's momentum does."""
+        weights = getattr(self.mass, "weights", None)
+        return self.N if weights is None else weights
+
     #: grid gradient of each body's mass, sum m_p grad N, (n_bodies, n_nodes, 2):
     #: contact normals (one field per body only)
     mass_gradient: np.ndarray | None = None
@@ -102,7 +111,7 @@ class StepContext:
             self.external[name] = grid_force
 
     def add_point_forces(self, name: str, forces: np.ndarray, points: np.ndarray | None = None) -> None:
-        """Add forces acting on points, ``N.T @ forces``, to each point's own field.
+        """Add forces acting on points, ``N.T @ forces`` (``W.T`` with HRZ mass), to each point's own field.
 
         Parameters
         ----------
@@ -112,7 +121,7 @@ class StepContext:
             The points the forces act on (all if omitted): for a few points
             only their rows of ``N`` are touched.
         """
-        N = self.N
+        N = self.transfer_weights
         n_nodes = N.shape[1]
         fields = 1 if self.body_slices is None else len(self.body_slices)
         grid_force = np.zeros((fields, n_nodes, 2))

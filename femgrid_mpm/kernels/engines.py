@@ -13,6 +13,11 @@ interface (``[solver] engine`` picks the implementation):
     G2P: ``v += dt N @ a``, ``x += dt (N @ v_rel + v_ref)``, density (Eqs.
     19-21); returns ``sum(v) + sum(x) + sum(stress)`` for the finiteness check.
 
+A mass model with its own transfer weights (``mass.weights``, HRZ: see
+:class:`femgrid_mpm.mass.HrzMass`) is assembled from the matrices, and its
+weights replace ``N`` in the P2G momentum and the G2P velocity increment;
+gradients and positions keep ``N``.
+
 :class:`ScipyTransfer` spells the paper's sparse linear algebra out with
 ``scipy.sparse`` matrices; :class:`CompiledTransfer` runs the kernels of
 :mod:`.transfer` and builds the matrices ``ctx.N``, ``ctx.dNdx``,
@@ -49,7 +54,7 @@ class ScipyTransfer:
         p = ctx.particles
         ctx.N, ctx.dNdx, ctx.dNdy = self.grid.shape_functions(p.x)  # ValueError if a point left the grid
         mass.assemble(ctx.N, p.mass, p.volume)
-        return ctx.N.T @ (p.mass[:, None] * (p.v - ctx.frame_velocity))
+        return ctx.transfer_weights.T @ (p.mass[:, None] * (p.v - ctx.frame_velocity))
 
     def internal_force(self, ctx: StepContext, dt: float, materials, body_slices) -> np.ndarray:
         p = ctx.particles
@@ -68,7 +73,7 @@ class ScipyTransfer:
     def to_points(self, ctx: StepContext, dt: float) -> float:
         p = ctx.particles
         relative_velocity = ctx.velocity - ctx.frame_velocity
-        p.v += dt * (ctx.N @ ctx.acceleration)
+        p.v += dt * (ctx.transfer_weights @ ctx.acceleration)
         p.x += dt * (ctx.N @ relative_velocity + ctx.frame_velocity)
         p.density *= np.exp(-dt * self._divergence)
         return p.v.sum() + p.x.sum() + p.stress.sum()
@@ -95,7 +100,12 @@ class CompiledTransfer:
         n, n_nodes = simulation.particles.n, grid.n_nodes
         self.grid_mass = np.zeros(n_nodes)
         self.grid_absolute = np.zeros(n_nodes if self.signed else 1)
-        self.grid_volume = np.zeros(1)
+        # N.T @ V_p: consistent mass (weak nodes) and the lumped mass threshold
+        self.want_volume = bool(getattr(simulation.mass, "needs_volume", False))
+        self.grid_volume = np.zeros(n_nodes if self.want_volume else 1)
+        # a mass model with its own transfer weights (HRZ) is assembled from the matrices
+        self.from_matrices = bool(getattr(simulation.mass, "needs_matrices", False))
+        self._no_acceleration = np.zeros((n_nodes, 2))
         self.divergence = np.zeros(n)
         self._relative = np.zeros((n_nodes, 2))
         self._strain_increment = self._gradient_increment = None
@@ -106,6 +116,7 @@ class CompiledTransfer:
         if hasattr(simulation.mass, "assemble_pattern"):
             connectivity = self.basis.tensor.connectivity if family == "tensor" else self.basis.connectivity
             self.pattern = mass_pattern(grid, connectivity)
+            self.want_volume = True
             self.grid_volume = np.zeros(n_nodes)
         # threads: chunked variants of the tensor kernels (lumped P2G, linear elastic stress, G2P)
         threads = int(getattr(simulation.scene.solver, "threads", 1))
@@ -128,15 +139,18 @@ class CompiledTransfer:
     def to_grid(self, ctx: StepContext, mass) -> np.ndarray:
         p = ctx.particles
         self.matrices.invalidate()
+        if self.from_matrices:  # N built by the kernel (ValueError if a point left the grid), then scipy products
+            mass.assemble(ctx.N, p.mass, p.volume)
+            return ctx.transfer_weights.T @ (p.mass[:, None] * (p.v - ctx.frame_velocity))
         momentum = np.empty((self.grid.n_nodes, 2))
         pattern = self.pattern
-        if self.threads > 1 and pattern is None:
+        if self.threads > 1 and pattern is None and not self.want_volume:
             outside = parallel.parallel_p2g(
                 p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, *self._arrays, self.grid_mass,
                 self.grid_absolute, momentum, self._mass_parts, self._absolute_parts, self._momentum_parts)
         else:
             outside = self._p2g(
-                p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, pattern is not None, pattern is not None,
+                p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, self.want_volume, pattern is not None,
                 *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum,
                 *(self._no_pattern if pattern is None else (pattern.indptr, pattern.rank, pattern.slots, pattern.data)),
             )
@@ -146,7 +160,8 @@ class CompiledTransfer:
         if pattern is not None:  # consistent: M assembled into the pattern
             mass.assemble_pattern(pattern, self.grid_mass, self.grid_volume)
         elif hasattr(mass, "assemble_sums"):
-            mass.assemble_sums(self.grid_mass, self.grid_absolute if self.signed else None)
+            mass.assemble_sums(self.grid_mass, self.grid_absolute if self.signed else None,
+                               self.grid_volume if self.want_volume else None)
         else:  # a mass model that needs the matrices
             mass.assemble(ctx.N, p.mass, p.volume)
         return momentum
@@ -178,13 +193,19 @@ class CompiledTransfer:
 
     def to_points(self, ctx: StepContext, dt: float) -> float:
         p = ctx.particles
+        # own transfer weights: the kernel moves the points (N) with no acceleration, W carries it after
+        acceleration = self._no_acceleration if self.from_matrices else ctx.acceleration
+        increment = dt * (ctx.transfer_weights @ ctx.acceleration) if self.from_matrices else None
         if self.threads > 1:
-            total = parallel.parallel_g2p(p.x, p.v, p.density, ctx.acceleration, self._relative, ctx.frame_velocity,
+            total = parallel.parallel_g2p(p.x, p.v, p.density, acceleration, self._relative, ctx.frame_velocity,
                                           dt, self.divergence, *self._arrays, self.threads)
         else:
-            total = self._g2p(p.x, p.v, p.density, ctx.acceleration, self._relative, ctx.frame_velocity, dt,
+            total = self._g2p(p.x, p.v, p.density, acceleration, self._relative, ctx.frame_velocity, dt,
                               self.divergence, *self._arrays)
         self.matrices.invalidate()  # the points moved
+        if increment is not None:
+            p.v += increment
+            total += float(increment.sum())
         return total + self._stress_total
 
 
