@@ -1,11 +1,11 @@
-"""The ``femgrid-mpm`` command line: ``run``, ``info`` and ``reproduce``.
+"""The ``femgrid-mpm`` command line: ``run``, ``resume``, ``info`` and ``reproduce``.
 
 Exit codes (:data:`EXIT_CODES`): 0 done; 2 bad input (a scene file, an
 argument, an output directory that cannot be written), reported as one line
 naming the file and the key, never a traceback, before anything is written;
 3 the simulation stopped on a numerical event (negative mass under policy
-``"error"``, a singular consistent mass, NaN, a particle leaving the grid),
-with every output written so far kept valid; 1 the outputs could not be
+``"error"``, a singular consistent mass, NaN, a runaway energy, a particle
+leaving the grid), with every output written so far kept valid; 1 the outputs could not be
 written during the run (e.g. a full disk); 130 interrupted (Ctrl-C), outputs
 so far kept.  The library raises; only this module exits.
 """
@@ -52,7 +52,7 @@ def _parser() -> argparse.ArgumentParser:
         description="Material point method in 2D on finite-element background grids.",
         epilog="Exit codes: " + "; ".join(f"{code} {meaning}" for code, meaning in EXIT_CODES.items()) + ".",
     )
-    commands = parser.add_subparsers(dest="command", required=True, metavar="{run,info,reproduce}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="{run,resume,info,reproduce}")
 
     def scene_arguments(command):
         command.add_argument("scene", metavar="SCENE.toml", help="the scene file")
@@ -72,6 +72,12 @@ def _parser() -> argparse.ArgumentParser:
     scene_arguments(run)
     run.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar (it is shown only when stderr is a terminal)")
+    run.add_argument("--checkpoint-every", type=_positive_steps, default=0, metavar="N",
+                     help="write the whole state to DIR/checkpoint.npz every N steps, for femgrid-mpm resume")
+
+    resume = commands.add_parser("resume", help="continue a run from the checkpoint in its output directory")
+    resume.add_argument("directory", metavar="DIR", help="the --out directory of a run with --checkpoint-every")
+    resume.add_argument("--no-progress", action="store_true", help="no progress bar (it is shown only when stderr is a terminal)")
 
     info = commands.add_parser("info", help="check a scene and print what a run would do")
     scene_arguments(info)
@@ -82,13 +88,23 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _positive_steps(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of steps, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1 (got {value})")
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code (see :data:`EXIT_CODES`)."""
     try:
         args = _parser().parse_args(argv)
     except SystemExit as exit_:  # --help (0) or a usage error (2, printed as one line)
         return exit_.code if isinstance(exit_.code, int) else EXIT_BAD_INPUT
-    handlers = {"run": _run, "info": _info, "reproduce": _reproduce}
+    handlers = {"run": _run, "resume": _resume, "info": _info, "reproduce": _reproduce}
     with warnings.catch_warnings():
         warnings.showwarning = _show_warning
         try:
@@ -244,14 +260,13 @@ def _info(args) -> int:
 
 def _run(args) -> int:
     """Run a scene into ``--out``; see the module docstring for the exit codes."""
-    from .diagnostics import SimulationStopped
     from .output import RunOutputs
 
     scene, overrides = _load(args)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise BadInput(f"--out {out}: exists and is not a directory")
-    outputs = RunOutputs(out, scene, source=args.scene, overrides=overrides)
+    outputs = RunOutputs(out, scene, source=args.scene, overrides=overrides, checkpoint_every=args.checkpoint_every)
     simulation = _build(scene, args.scene, outputs.observers)
     try:
         source_bytes = Path(args.scene).read_bytes()
@@ -262,11 +277,72 @@ def _run(args) -> int:
         outputs.start(simulation, source_bytes)
     except OSError as error:
         raise BadInput(f"--out {out}: cannot write there: {error.strerror or error}") from None
+    return _execute(simulation, outputs, progress_bar=not args.no_progress)
 
-    bar, progress = _progress_bar(simulation, enabled=not args.no_progress and sys.stderr.isatty())
+
+def _resume(args) -> int:
+    """Continue the run in ``DIR`` from ``DIR/checkpoint.npz`` with the scene ``DIR/scene.toml``."""
+    from .checkpoint import CHECKPOINT_FILE, CheckpointError, read_checkpoint, scene_digest
+    from .output import SCENE_FILE, RunOutputs
+    from .scene import SceneError, load_scene
+
+    directory = Path(args.directory)
+    if not directory.is_dir():
+        raise BadInput(f"{directory}: no such directory")
+    try:
+        arrays, values = read_checkpoint(directory / CHECKPOINT_FILE)
+    except CheckpointError as error:
+        raise BadInput(str(error)) from None
+    scene_path = directory / SCENE_FILE
+    try:
+        scene = load_scene(scene_path)
+        digest = scene_digest(scene_path)
+    except SceneError as error:
+        raise BadInput(str(error)) from None
+    except OSError as error:
+        raise BadInput(f"{scene_path}: cannot be read: {error.strerror or error}") from None
+    if digest != values.get("scene_sha256"):
+        raise BadInput(f"{scene_path}: is not the scene of {directory / CHECKPOINT_FILE} (changed since it was written)")
+    try:
+        outputs = RunOutputs.resumed(directory, scene, values["outputs"])
+    except (KeyError, TypeError, ValueError) as error:
+        raise BadInput(f"{directory / CHECKPOINT_FILE}: not a readable checkpoint (outputs: {error!r})") from None
+    simulation = _build(scene, scene_path, outputs.observers)
+    # before the state is put back, as the interrupted run did before its first step:
+    # the critical step is estimated at the start (it is in the summary)
+    _warn_time_step(simulation)
+    try:
+        simulation.restore(arrays, values["simulation"])
+    except (KeyError, TypeError, ValueError) as error:
+        raise BadInput(f"{directory / CHECKPOINT_FILE}: does not fit {scene_path} ({type(error).__name__}: {error})") from None
+    try:
+        outputs.resume(simulation)
+    except OSError as error:
+        raise BadInput(f"{directory}: cannot write there: {error.strerror or error}") from None
+    return _execute(simulation, outputs, progress_bar=not args.no_progress)
+
+
+def _execute(simulation, outputs, progress_bar: bool) -> int:
+    """Run a built simulation into its outputs (started or resumed), writing
+    checkpoints if asked; the exit code (see the module docstring)."""
+    from .checkpoint import CHECKPOINT_FILE, scene_digest, write_checkpoint
+    from .diagnostics import SimulationStopped
+    from .output import SCENE_FILE
+
+    out = outputs.directory
+    checkpoint = None
+    if outputs.checkpoint_every:
+        digest = scene_digest(out / SCENE_FILE)
+
+        def checkpoint(simulation):
+            arrays, values = simulation.state()
+            write_checkpoint(out / CHECKPOINT_FILE, arrays,
+                             {"scene_sha256": digest, "simulation": values, "outputs": outputs.state()})
+
+    bar, progress = _progress_bar(simulation, enabled=progress_bar and sys.stderr.isatty())
     try:
         try:
-            result = simulation.run(progress=progress)
+            result = simulation.run(progress=progress, checkpoint=checkpoint, checkpoint_every=outputs.checkpoint_every)
         finally:
             if bar is not None:
                 bar.close()
@@ -299,6 +375,7 @@ def _progress_bar(simulation, enabled: bool):
         sized = False
     bar = tqdm(
         total=simulation.n_steps,
+        initial=simulation.step_index,  # a resumed run starts at its checkpoint
         unit="step",
         file=sys.stderr,
         dynamic_ncols=sized,

@@ -141,9 +141,9 @@ class EnergyGuard:
     recorded), else the points' kinetic energy, which alone cannot exceed the
     bound in a run that keeps its energy balance (one compiled pass over the
     points, :func:`points_kinetic_energy`: ~0.8 ns per point, 1% of a lumped
-    step).  Every step, because an unstable step grows the energy ~1000-fold
-    per step at 3x the critical one: its points leave the grid within 4
-    steps.
+    step).  Every step, because at 3x the critical step the energy grows
+    ~1000-fold per step: the vibrating bar's points leave the grid at step 4
+    (the guard stops it at step 1).
     """
 
     initial: float

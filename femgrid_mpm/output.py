@@ -23,6 +23,9 @@ The outputs of a run in ``DIR`` (the contract documented in the README):
 ``scene.toml``, ``source_scene.toml``
     The scene as run (overrides applied, every default spelled out) and the
     scene file as given, byte for byte.
+``checkpoint.npz``
+    With ``--checkpoint-every N``: the whole state every N steps, for
+    ``femgrid-mpm resume`` (:mod:`femgrid_mpm.checkpoint`).
 
 Examples
 --------
@@ -61,6 +64,7 @@ SUMMARY_FILE = "summary.json"
 SCENE_FILE = "scene.toml"
 SOURCE_SCENE_FILE = "source_scene.toml"
 SERIES_FILE = "particles.pvd"
+CHECKPOINT_FILE = "checkpoint.npz"
 SERIES_DIRECTORY = "particles"
 #: names of one series' point files: ``particles/particles_000120.vtu`` (the step)
 SERIES_PATTERN = re.compile(r"^particles_\d+\.vtu$")
@@ -158,9 +162,16 @@ class EnergyCsv:
 
     def add_row(self, row: dict) -> None:
         """Append one record (a row of :class:`femgrid_mpm.energy.EnergyBookkeeping`)."""
-        self.lines.append(",".join(_number(row[name]) for name in self.columns) + "\n")
+        self.lines.append(self._line(row))
         if self.throttle.due():
             self.throttle.run(self.flush)
+
+    def extend(self, rows: list[dict]) -> None:
+        """Append records without writing (a resumed run's records so far)."""
+        self.lines.extend(self._line(row) for row in rows)
+
+    def _line(self, row: dict) -> str:
+        return ",".join(_number(row[name]) for name in self.columns) + "\n"
 
     def flush(self) -> None:
         atomic_write(self.path, "".join(self.lines))
@@ -382,14 +393,17 @@ class RunOutputs:
         Dotted keys changed from the file (recorded in the summary).
     flush_seconds : float
         How often growing files are rewritten during the run (see :class:`Throttle`).
+    checkpoint_every : int
+        Steps between checkpoints (``checkpoint.npz``); 0: none.
     """
 
-    def __init__(self, directory, scene, source=None, overrides=None, flush_seconds: float = 1.0):
+    def __init__(self, directory, scene, source=None, overrides=None, flush_seconds: float = 1.0, checkpoint_every: int = 0):
         self.directory = Path(directory)
         self.scene = scene
         self.source = Path(source) if source is not None else None
         self.overrides = dict(overrides or {})
         self.flush_seconds = flush_seconds
+        self.checkpoint_every = int(checkpoint_every)
         self.observers = declared_observers(scene, self.directory, flush_seconds)
         self.energy: EnergyCsv | None = None
         self.simulation = None
@@ -419,7 +433,7 @@ class RunOutputs:
         atomic_write(directory / SCENE_FILE, scene_to_toml(self.scene, header))
         # An earlier run's files would mix with this run's (more particle
         # files than records, an energy.csv of another scene): remove ours only.
-        for name in (ENERGY_FILE, FINAL_FILE, SERIES_FILE):
+        for name in (ENERGY_FILE, FINAL_FILE, SERIES_FILE, CHECKPOINT_FILE):
             (directory / name).unlink(missing_ok=True)
         series = directory / SERIES_DIRECTORY
         if series.is_dir():
@@ -430,12 +444,58 @@ class RunOutputs:
             directory / SUMMARY_FILE,
             self._summary(simulation.result("running", "the run has not ended (if it stays so, it was killed)"), None),
         )
+        self._attach_energy(simulation)
+
+    def _attach_energy(self, simulation) -> None:
+        """``energy.csv`` with the records so far (none, or a resumed run's), written
+        at once, then fed by the energy bookkeeping."""
         if simulation.energy is not None:
             forced = simulation.effects[Stage.EXTERNAL_FORCE] or simulation.effects[Stage.ADJUST_FORCE]
             columns = COLUMNS if forced else tuple(c for c in COLUMNS if c != "external_work")
-            self.energy = EnergyCsv(directory / ENERGY_FILE, columns, self.flush_seconds)
+            self.energy = EnergyCsv(self.directory / ENERGY_FILE, columns, self.flush_seconds)
+            self.energy.extend(simulation.energy.rows)
             self.energy.flush()  # the header, so the file exists from the start
             simulation.energy.sink = self.energy.add_row
+
+    def state(self) -> dict:
+        """What the files of this run need to go on after a checkpoint (JSON):
+        where the scene came from, the overrides, the particle series so far."""
+        return {
+            "scene_file": str(self.source) if self.source is not None else None,
+            "overrides": self.overrides,
+            "checkpoint_every": self.checkpoint_every,
+            "series": [[time, name] for observer in self.observers for time, name in observer.entries],
+        }
+
+    @classmethod
+    def resumed(cls, directory, scene, state: dict, flush_seconds: float = 1.0) -> "RunOutputs":
+        """The outputs of a run in ``directory`` continued from a checkpoint with ``state``
+        (:meth:`state`); call :meth:`resume` once the simulation is restored."""
+        outputs = cls(directory, scene, source=state["scene_file"], overrides=state["overrides"],
+                      flush_seconds=flush_seconds, checkpoint_every=state["checkpoint_every"])
+        outputs._series_state = [(float(time), str(name)) for time, name in state["series"]]
+        return outputs
+
+    def resume(self, simulation) -> None:
+        """Go on writing into the directory of a checkpointed run: the scene files
+        stay, ``energy.csv`` and ``particles.pvd`` are rewritten with the records up
+        to the checkpoint (a killed run's later records are written again, the same,
+        as the run comes to them), and the summary says ``running``.
+
+        Raises
+        ------
+        OSError
+            If the directory cannot be written.
+        """
+        self.simulation = simulation
+        for observer in self.observers:
+            observer.entries[:] = self._series_state
+            observer.close()
+        write_summary(
+            self.directory / SUMMARY_FILE,
+            self._summary(simulation.result("running", "the run has not ended (if it stays so, it was killed)"), None),
+        )
+        self._attach_energy(simulation)
 
     def finish(self, result, stop=None) -> dict:
         """Write everything that is still pending, ``final.npz`` and ``summary.json``.
@@ -477,5 +537,6 @@ class RunOutputs:
         names += [ENERGY_FILE] if self.energy is not None else []
         names += [SERIES_FILE] if self.observers else []
         names += [FINAL_FILE] if result.status != "running" else []
+        names += [CHECKPOINT_FILE] if self.checkpoint_every else []
         summary["files"] = sorted(names)
         return summary

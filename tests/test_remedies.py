@@ -152,9 +152,9 @@ def test_hrz_rescues_serendipity_and_costs_q2_some_accuracy():
 
 def test_hrz_lets_the_q2_box_impact_run():
     """Lumped q2 stops at step 0 (negative masses), or under "warn" runs away at
-    step 44: the box's points give the nodes it shares with the beam negative
-    weights.  HRZ runs to 3 s with the total energy at most 2.4% above its
-    start (q1 lumped: 2.6%); the negative row sums are still recorded."""
+    step 44 as the box reaches the beam.  HRZ runs to 3 s with the total
+    energy at most 2.4% above its start (q1 lumped: 2.6%); the negative row
+    sums are still recorded."""
     result, stop = run(bundled_scene("box_impact").with_overrides(**{"grid.basis": "q2", "solver.mass": "hrz"}))
     assert stop is None and result.summary["steps"] == 600
     total = result.energy["total"]

@@ -1,0 +1,286 @@
+"""Checkpoints and ``femgrid-mpm resume``: a run continued from a checkpoint is
+bit for bit the run that was never interrupted; the same scene run twice
+gives the same bytes.
+
+The reference is the uninterrupted run itself: every output file is compared
+byte for byte, except the wall-time fields of ``summary.json`` (and the
+checkpoint file, which records the wall time so far).
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from femgrid_mpm import cli
+from femgrid_mpm.checkpoint import CHECKPOINT_FILE, CheckpointError, read_checkpoint, write_checkpoint
+from femgrid_mpm.energy import COLUMNS
+from femgrid_mpm.output import scene_to_toml
+from femgrid_mpm.scene import bundled_scene
+from femgrid_mpm.solver import Simulation
+
+ROOT = Path(__file__).parents[1]
+VIBRATING_BAR = ROOT / "scenes" / "vibrating_bar.toml"
+ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+
+
+class Interrupted(Exception):
+    """Stands for the kill: raised by the checkpoint callback after writing."""
+
+
+def interrupted_then_resumed(scene, tmp_path, checkpoint_every, stop_after=1, configure=lambda simulation: None):
+    """Run until the ``stop_after``-th checkpoint is written to a file, drop
+    the simulation, build a new one from the scene, restore the file and run
+    to the end."""
+    path = tmp_path / CHECKPOINT_FILE
+    written = []
+
+    def checkpoint(simulation):
+        arrays, values = simulation.state()
+        write_checkpoint(path, arrays, {"simulation": values})
+        written.append(simulation.step_index)
+        if len(written) == stop_after:
+            raise Interrupted
+
+    first = Simulation(scene)
+    configure(first)
+    with pytest.raises(Interrupted):
+        first.run(checkpoint=checkpoint, checkpoint_every=checkpoint_every)
+    arrays, values = read_checkpoint(path)
+    second = Simulation(scene)
+    configure(second)
+    second.restore(arrays, values["simulation"])
+    assert second.step_index == written[-1] > 0
+    return second, second.run()
+
+
+def assert_same_run(result, reference):
+    p, q = result.particles, reference.particles
+    for name in p.__dataclass_fields__:
+        np.testing.assert_array_equal(getattr(p, name), getattr(q, name), err_msg=name)
+    if reference.energy is not None:
+        for name in COLUMNS:
+            np.testing.assert_array_equal(result.energy[name], reference.energy[name], err_msg=name)
+    summary = {k: v for k, v in result.summary.items() if k != "wall_time"}
+    assert summary == {k: v for k, v in reference.summary.items() if k != "wall_time"}
+
+
+def with_cg(simulation):
+    """Consistent mass solved by CG (as beyond 5000 nodes), warm-started from
+    the last two solutions: that history must come through the checkpoint."""
+    simulation.mass.linear_solver = "cg"
+
+
+CASES = {
+    # the paper's bar, records every 7 steps (not a divisor of the checkpoint interval)
+    "q1 lumped": (bundled_scene("vibrating_bar").with_overrides(**{"time.end": 0.9, "output.every": 7}), 100, None),
+    # consistent mass by CG: its warm start carries over
+    "bspline3 consistent cg": (bundled_scene("vibrating_bar").with_overrides(
+        **{"grid.basis": "bspline3", "solver.mass": "consistent", "time.end": 0.6}), 50, with_cg),
+    # HRZ, a neo-Hookean body, gravity, a ramped point load and damping: the work ledger in order
+    "q2 hrz, loads": (bundled_scene("cantilever_large").with_overrides(
+        **{"grid.basis": "q2", "solver.mass": "hrz", "bodies.0.material.model": "neo_hookean", "time.end": 0.6,
+           "time.rest_speed": None, "time.dt": 0.005, "loads.0.ramp": 0.5}), 40, None),
+    # frictional contact books its work; the box is 0.5 m above the beam, contact from step ~50
+    "box frictional": (bundled_scene("box_impact").with_overrides(
+        **{"contact.kind": "frictional", "contact.friction": 0.3, "time.end": 0.6}), 40, None),
+    # the mass threshold under q2, negative masses from step 0 (counters)
+    "q2 threshold": (bundled_scene("vibrating_bar").with_overrides(
+        **{"grid.basis": "q2", "solver.negative_mass": "threshold", "bodies.0.upper": (4.75, 1.0), "time.end": 0.6}), 50, None),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_resumed_run_is_bit_identical(case, tmp_path):
+    scene, every, configure = CASES[case]
+    configure = configure or (lambda simulation: None)
+    reference_simulation = Simulation(scene)
+    configure(reference_simulation)
+    reference = reference_simulation.run()
+    resumed_simulation, resumed = interrupted_then_resumed(scene, tmp_path, every, stop_after=2, configure=configure)
+    assert_same_run(resumed, reference)
+    if configure is with_cg:
+        assert resumed.summary["consistent_mass"]["cg_iterations"] > 0
+
+
+def test_checkpoint_must_carry_the_cg_history(tmp_path):
+    """The test above is sensitive: dropping CG's warm start changes the bits."""
+    scene, every, configure = CASES["bspline3 consistent cg"]
+    reference_simulation = Simulation(scene)
+    configure(reference_simulation)
+    reference = reference_simulation.run()
+    resumed_simulation, resumed = interrupted_then_resumed(
+        scene, tmp_path, every, configure=lambda s: (configure(s), setattr(s.mass, "restore", lambda arrays, values: None)))
+    assert not np.array_equal(resumed.particles.v, reference.particles.v)
+
+
+def test_quasi_static_run_resumed_comes_to_rest_at_the_same_step(tmp_path):
+    """No checkpoint is taken at the step where the run comes to rest (a resumed
+    run would step past it)."""
+    scene = bundled_scene("cantilever_quasistatic").with_overrides(**{"output.every": 50})
+    reference = Simulation(scene).run()
+    assert reference.message.startswith("at rest")
+    _, resumed = interrupted_then_resumed(scene, tmp_path, 200, stop_after=3)
+    assert_same_run(resumed, reference)
+
+
+def test_restore_refuses_another_scene(tmp_path):
+    scene = bundled_scene("vibrating_bar")
+    arrays, values = Simulation(scene).state()
+    other = Simulation(scene.with_overrides(**{"bodies.0.points_per_cell": 2}))
+    with pytest.raises(ValueError, match="particles.x"):
+        other.restore(arrays, values)
+
+
+# -- the command line ----------------------------------------------------------------------------
+
+
+def bar_argv(out, *extra):
+    return ["run", str(VIBRATING_BAR), "--out", str(out), "--set", "time.end=20", "--set", "output.every=10",
+            "--set", "output.particles=true", "--set", "damping={kind = \"mass\", coefficient = 0.01}", *extra]
+
+
+def output_bytes(directory: Path) -> dict:
+    """Every file of a run's directory (hidden temporaries and the checkpoint
+    excluded), ``summary.json`` without its wall time."""
+    files = {}
+    for path in sorted(directory.rglob("*")):
+        name = str(path.relative_to(directory))
+        if path.is_dir() or path.name.startswith(".") or name == CHECKPOINT_FILE:
+            continue
+        if name == "summary.json":
+            summary = json.loads(path.read_text())
+            summary.pop("wall_time")
+            files[name] = summary
+        else:
+            files[name] = path.read_bytes()
+    return files
+
+
+def test_sigkilled_run_resumes_to_the_same_bytes(tmp_path, capsys):
+    """The bar for 20 s (6667 steps, damped: the work column), a checkpoint
+    every 500 steps; killed with SIGKILL a little after the first checkpoint,
+    then ``femgrid-mpm resume``: every file equals the uninterrupted run's."""
+    full, killed = tmp_path / "full", tmp_path / "killed"
+    assert cli.main(bar_argv(full, "--checkpoint-every", "500")) == cli.EXIT_DONE
+    process = subprocess.Popen([sys.executable, "-m", "femgrid_mpm.cli", *bar_argv(killed, "--checkpoint-every", "500")],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=ENV)
+    try:
+        deadline = time.monotonic() + 120
+        while not (killed / CHECKPOINT_FILE).exists():
+            assert process.poll() is None, "the run ended before it could be killed"
+            assert time.monotonic() < deadline, "no checkpoint in time"
+            time.sleep(0.005)
+        time.sleep(0.2)
+    finally:
+        process.send_signal(signal.SIGKILL)
+        process.wait(timeout=60)
+    assert process.returncode == -signal.SIGKILL
+    assert json.loads((killed / "summary.json").read_text())["status"] == "running"
+    assert not (killed / "final.npz").exists()
+    step = read_checkpoint(killed / CHECKPOINT_FILE)[1]["simulation"]["step"]
+    assert step % 500 == 0 and 0 < step < 6667
+    capsys.readouterr()
+    assert cli.main(["resume", str(killed)]) == cli.EXIT_DONE
+    assert capsys.readouterr().out.startswith("reached t = 20.001 s: 6667 steps")
+    resumed, reference = output_bytes(killed), output_bytes(full)
+    assert resumed.keys() == reference.keys()
+    assert len([name for name in reference if name.startswith("particles/")]) == 668
+    for name in reference:
+        assert resumed[name] == reference[name], name
+
+
+def test_same_scene_twice_gives_the_same_bytes(tmp_path):
+    """Two runs in two processes: every output file byte for byte (wall time aside)."""
+    runs = []
+    for name in ("first", "second"):
+        out = tmp_path / name
+        argv = [sys.executable, "-m", "femgrid_mpm.cli", "run", str(VIBRATING_BAR), "--out", str(out), "--basis", "q2",
+                "--mass", "hrz", "--set", "time.end=2", "--set", "output.every=25", "--set", "output.particles=true"]
+        assert subprocess.run(argv, capture_output=True, env=ENV, timeout=300).returncode == 0
+        runs.append(output_bytes(out))
+    assert runs[0].keys() == runs[1].keys() and "final.npz" in runs[0] and "particles/particles_650.vtu" in runs[0]
+    for name in runs[0]:
+        assert runs[0][name] == runs[1][name], name
+
+
+def test_resume_of_a_finished_run_repeats_its_end(tmp_path, capsys):
+    """The last checkpoint stays after the end: resuming recomputes the tail
+    and rewrites the same outputs (a stopped run stops again, the same way)."""
+    out = tmp_path / "out"
+    assert cli.main(bar_argv(out, "--set", "time.end=1", "--checkpoint-every", "100")) == cli.EXIT_DONE
+    before = output_bytes(out)
+    assert cli.main(["resume", str(out)]) == cli.EXIT_DONE
+    assert output_bytes(out) == before
+    summary = json.loads((out / "summary.json").read_text())
+    assert "checkpoint.npz" in summary["files"]
+
+
+def run_cli(argv, capsys):
+    code = cli.main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+@pytest.mark.parametrize("damage, words", [
+    ("missing directory", "no such directory"),
+    ("no checkpoint", "no checkpoint here"),
+    ("truncated", "not a readable checkpoint"),
+    ("not a zip", "not a readable checkpoint"),
+    ("other format", "not a checkpoint of this version"),
+    ("scene edited", "is not the scene of"),
+    ("scene missing", "no such scene file"),
+    ("other scene", "does not fit"),
+])
+def test_resume_refuses_bad_checkpoints_in_one_line(tmp_path, capsys, damage, words):
+    out = tmp_path / "out"
+    assert cli.main(bar_argv(out, "--set", "time.end=0.5", "--checkpoint-every", "50")) == cli.EXIT_DONE
+    capsys.readouterr()
+    checkpoint, scene_file = out / CHECKPOINT_FILE, out / "scene.toml"
+    if damage == "missing directory":
+        out = tmp_path / "nowhere"
+    elif damage == "no checkpoint":
+        checkpoint.unlink()
+    elif damage == "truncated":
+        checkpoint.write_bytes(checkpoint.read_bytes()[:1000])
+    elif damage == "not a zip":
+        checkpoint.write_bytes(b"\x00" * 64)
+    elif damage == "other format":
+        arrays, values = read_checkpoint(checkpoint)
+        write_checkpoint(checkpoint, arrays, {**values, "format": "something else 9"})
+    elif damage == "scene edited":
+        scene_file.write_text(scene_file.read_text().replace("end = 0.5", "end = 0.6"))
+    elif damage == "scene missing":
+        scene_file.unlink()
+    elif damage == "other scene":  # a well-formed checkpoint whose points are another scene's
+        other = Simulation(bundled_scene("vibrating_bar").with_overrides(**{"bodies.0.points_per_cell": 2}))
+        arrays, values = read_checkpoint(checkpoint)
+        arrays.update({name: array for name, array in other.state()[0].items() if name.startswith("particles.")})
+        values.pop("format")
+        write_checkpoint(checkpoint, arrays, values)
+    before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()} if out.exists() else {}
+    code, stdout, err = run_cli(["resume", out], capsys)
+    assert code == cli.EXIT_BAD_INPUT and stdout == ""
+    assert "Traceback" not in err
+    (line,) = err.splitlines()
+    assert line.startswith("femgrid-mpm: error: ") and words in line
+    after = {p.name: p.stat().st_mtime_ns for p in out.iterdir()} if out.exists() else {}
+    assert after == before  # nothing written
+
+
+@pytest.mark.parametrize("value", ["0", "-3", "ten", "1.5"])
+def test_checkpoint_every_must_be_a_positive_count(tmp_path, capsys, value):
+    code, _, err = run_cli(bar_argv(tmp_path / "out", "--checkpoint-every", value), capsys)
+    assert code == cli.EXIT_BAD_INPUT and len(err.splitlines()) == 1 and "--checkpoint-every" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_read_checkpoint_errors_are_checkpoint_errors(tmp_path):
+    with pytest.raises(CheckpointError, match="no checkpoint here"):
+        read_checkpoint(tmp_path / CHECKPOINT_FILE)
