@@ -44,6 +44,30 @@ def _relative_velocity(velocity, v_ref, relative):
         relative[i, 1] = velocity[i, 1] - v_ref[1]
 
 
+@numba.njit(cache=True, inline="always")
+def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, divergence):
+    """Paper Eqs. 18 and 6 for point ``p``: strain increment from its velocity
+    gradient, the incremental linear elastic stress, ``div v`` for Eq. 21.
+    Returns the new stress (xx, yy, xy)."""
+    e_xx = dt * dvx_dx
+    e_yy = dt * dvy_dy
+    e_xy = dt * (0.5 * (dvx_dy + dvy_dx))
+    strain[p, 0] += e_xx
+    strain[p, 1] += e_yy
+    strain[p, 2] += e_xy
+    lam = lame[body[p], 0]
+    two_mu = lame[body[p], 1]
+    volumetric = e_xx + e_yy
+    s_xx = stress[p, 0] + (lam * volumetric + two_mu * e_xx)
+    s_yy = stress[p, 1] + (lam * volumetric + two_mu * e_yy)
+    s_xy = stress[p, 2] + two_mu * e_xy
+    stress[p, 0] = s_xx
+    stress[p, 1] = s_yy
+    stress[p, 2] = s_xy
+    divergence[p] = dvx_dx + dvy_dy
+    return s_xx, s_yy, s_xy
+
+
 @numba.njit(cache=True)
 def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
         marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity,
@@ -119,23 +143,8 @@ def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_
             dvy_dx += wx[k] * ry
             dvx_dy += wy[k] * rx
             dvy_dy += wy[k] * ry
-        e_xx = dt * dvx_dx
-        e_yy = dt * dvy_dy
-        e_xy = dt * (0.5 * (dvx_dy + dvy_dx))
-        strain[p, 0] += e_xx
-        strain[p, 1] += e_yy
-        strain[p, 2] += e_xy
-        lam = lame[body[p], 0]
-        two_mu = lame[body[p], 1]
-        volumetric = e_xx + e_yy
-        s_xx = stress[p, 0] + (lam * volumetric + two_mu * e_xx)
-        s_yy = stress[p, 1] + (lam * volumetric + two_mu * e_yy)
-        s_xy = stress[p, 2] + two_mu * e_xy
-        stress[p, 0] = s_xx
-        stress[p, 1] = s_yy
-        stress[p, 2] = s_xy
+        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, divergence)
         total += s_xx + s_yy + s_xy
-        divergence[p] = dvx_dx + dvy_dy
         volume = mass_p[p] / density_p[p]
         w_xx = volume * s_xx
         w_yy = volume * s_yy
@@ -386,23 +395,8 @@ def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mas
         element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
                                                    factors_x, table_x, factors_y, table_y)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
-        e_xx = dt * dvx_dx
-        e_yy = dt * dvy_dy
-        e_xy = dt * (0.5 * (dvx_dy + dvy_dx))
-        strain[p, 0] += e_xx
-        strain[p, 1] += e_yy
-        strain[p, 2] += e_xy
-        lam = lame[body[p], 0]
-        two_mu = lame[body[p], 1]
-        volumetric = e_xx + e_yy
-        s_xx = stress[p, 0] + (lam * volumetric + two_mu * e_xx)
-        s_yy = stress[p, 1] + (lam * volumetric + two_mu * e_yy)
-        s_xy = stress[p, 2] + two_mu * e_xy
-        stress[p, 0] = s_xx
-        stress[p, 1] = s_yy
-        stress[p, 2] = s_xy
+        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, divergence)
         total += s_xx + s_yy + s_xy
-        divergence[p] = dvx_dx + dvy_dy
         volume = mass_p[p] / density_p[p]
         _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, volume * s_xx, volume * s_yy, volume * s_xy,
                       force)
