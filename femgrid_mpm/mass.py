@@ -1,10 +1,20 @@
-"""Grid mass: lumped (paper Eqs. 15-16) and consistent (Eqs. 10, 17, 19, 20).
+"""Grid mass: lumped (paper Eqs. 15-16), HRZ and consistent (Eqs. 10, 17, 19, 20).
 
-Both models share one interface: ``assemble(N, m_p)`` once per step, then
+The models share one interface: ``assemble(N, m_p)`` once per step, then
 ``solve(rhs)`` for the nodal velocities (rhs = momentum, Eq. 17) and for the
 nodal accelerations (rhs = force, Eq. 10).  Nodes that no point touches are
 *inactive*: their solution is zero.  ``lumped`` (the row sums, Eq. 15) is
-always available for diagnostics.
+always available for diagnostics.  What a model needs from the compiled
+P2G it says with ``assemble_sums`` (the sums; ``needs_volume`` adds
+``N.T @ V_p``), ``assemble_pattern`` (the consistent matrix) or
+``needs_matrices`` (N itself); a model with its own transfer weights
+exposes them as ``weights`` (:class:`HrzMass`).
+
+Negative and tiny lumped masses (q2, serendipity) have two remedies here:
+the threshold of :class:`LumpedMass` (the absolute mass below a fraction of
+a node's full share) and :class:`HrzMass` (a positive diagonal for every
+basis, with transfers to match); the README's "Hard cases" has what they
+measure.
 
 Consistent mass and its singularities
 -------------------------------------

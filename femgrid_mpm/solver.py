@@ -107,6 +107,7 @@ class Simulation:
         self.step_index = 0
         self.time = 0.0
         self.wall_time = 0.0
+        self._run_started = None
         # a floor of 1e-9 x sum E V: the strain energy of a strain ~4.5e-5 throughout every body
         stiffness_volume = sum(body.material.E * float(self.particles.volume[members].sum())
                                for body, members in zip(scene.bodies, self.body_slices))
@@ -311,7 +312,7 @@ class Simulation:
             the state up to that step.
         """
         start = clock.perf_counter()
-        self._run_started = start
+        self._run_started = start  # for the wall time in a checkpoint
         ending = "reached t = {time:.6g} s"
         try:
             while self.step_index < self.n_steps:
@@ -331,6 +332,8 @@ class Simulation:
             self.wall_time += clock.perf_counter() - start
             stop.result = self.result("stopped", str(stop))
             raise
+        finally:
+            self._run_started = None
         self.wall_time += clock.perf_counter() - start
         return self.result("completed", ending.format(time=self.time))
 
@@ -369,7 +372,7 @@ class Simulation:
             "step": self.step_index,
             "time": self.time,
             "dt": self.dt,
-            "wall_time": self.wall_time + (clock.perf_counter() - self._run_started if hasattr(self, "_run_started") else 0.0),
+            "wall_time": self.wall_time + (clock.perf_counter() - self._run_started if self._run_started else 0.0),
             "work": [[name, value] for name, value in self.context.work.items()],
             "energy_guard": {"initial": self.energy_guard.initial, "floor": self.energy_guard.floor},
             "negative_mass": self.negative_mass.state(),

@@ -80,6 +80,8 @@ def with_cg(simulation):
 CASES = {
     # the paper's bar, records every 7 steps (not a divisor of the checkpoint interval)
     "q1 lumped": (bundled_scene("vibrating_bar").with_overrides(**{"time.end": 0.9, "output.every": 7}), 100, None),
+    # dt = "auto": the critical step is estimated from the scene's start, before the state is restored
+    "q1 dt auto": (bundled_scene("vibrating_bar").with_overrides(**{"time.dt": "auto", "time.end": 2.0}), 5, None),
     # consistent mass by CG: its warm start carries over
     "bspline3 consistent cg": (bundled_scene("vibrating_bar").with_overrides(
         **{"grid.basis": "bspline3", "solver.mass": "consistent", "time.end": 0.6}), 50, with_cg),
