@@ -197,7 +197,8 @@ def run(out_dir, resolutions=PAPER_RESOLUTION) -> dict:
 
     text = (
         "Cantilever (paper section 4.1): L = 8, H = 1, E = 3e5, nu = 0, rho = 1e3, clamped at x <= 0, "
-        "load at the upper right corner.  Tip = neutral-axis deflection of the last column of points "
+        "load at the upper right corner (for F = 800 at the free end's neutral axis, as in the elastica).  "
+        "Tip = neutral-axis deflection of the last column of points "
         f"(x = L - spacing/6).  T&G(a): the paper's Eqs. 33-34; clamped: a fully clamped 2D FE solution "
         f"({clamp_factor:.4f} x T&G(a)), which the grid's support represents.\n\n"
         "## Paper's protocol (Eq. 35 load ramped over t = 20 s) and quasi-static protocol, spacing 0.5\n\n"
