@@ -603,6 +603,17 @@ def _csr_times_dense(indptr, indices, data, x, out):
     return out
 
 
+@numba.njit(cache=True, inline="always")
+def _precondition(r, z, use_tensor, inverse_diagonal, scale, excluded, factor_x, factor_y):
+    """``z = P^-1 r``: the splines' tensor Gram preconditioner, or Jacobi."""
+    if use_tensor:
+        _apply_tensor(r, z, scale, excluded, factor_x, factor_y)
+    else:
+        for i in range(r.shape[0]):
+            for c in range(r.shape[1]):
+                z[i, c] = inverse_diagonal[i] * r[i, c]
+
+
 @numba.njit(cache=True)
 def _compiled_cg(indptr, indices, data, b, x0, inverse_diagonal, rtol, max_iterations,
                  use_tensor, scale, excluded, factor_x, factor_y):
@@ -624,12 +635,7 @@ def _compiled_cg(indptr, indices, data, b, x0, inverse_diagonal, rtol, max_itera
         for i in range(n):
             norm += b[i, c] * b[i, c]
         target[c] = rtol * np.sqrt(norm)
-    if use_tensor:
-        _apply_tensor(r, z, scale, excluded, factor_x, factor_y)
-    else:
-        for i in range(n):
-            for c in range(k):
-                z[i, c] = inverse_diagonal[i] * r[i, c]
+    _precondition(r, z, use_tensor, inverse_diagonal, scale, excluded, factor_x, factor_y)
     for i in range(n):
         for c in range(k):
             p[i, c] = z[i, c]
@@ -663,12 +669,7 @@ def _compiled_cg(indptr, indices, data, b, x0, inverse_diagonal, rtol, max_itera
             for c in range(k):
                 x[i, c] += alpha[c] * p[i, c]
                 r[i, c] -= alpha[c] * Ap[i, c]
-        if use_tensor:
-            _apply_tensor(r, z, scale, excluded, factor_x, factor_y)
-        else:
-            for i in range(n):
-                for c in range(k):
-                    z[i, c] = inverse_diagonal[i] * r[i, c]
+        _precondition(r, z, use_tensor, inverse_diagonal, scale, excluded, factor_x, factor_y)
         for i in range(n):
             for c in range(k):
                 rz_new[c] += r[i, c] * z[i, c]

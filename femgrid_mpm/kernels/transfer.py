@@ -113,6 +113,33 @@ def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
     return -1
 
 
+@numba.njit(cache=True, inline="always")
+def _flat_gradient(element, n_local, connectivity, relative, wx, wy):
+    """``dNdx @ v_rel`` and ``dNdy @ v_rel`` at one point: (d vx/dx, d vy/dx, d vx/dy, d vy/dy)."""
+    dvx_dx = 0.0
+    dvy_dx = 0.0
+    dvx_dy = 0.0
+    dvy_dy = 0.0
+    for k in range(n_local):
+        node = connectivity[element, k]
+        rx = relative[node, 0]
+        ry = relative[node, 1]
+        dvx_dx += wx[k] * rx
+        dvy_dx += wx[k] * ry
+        dvx_dy += wy[k] * rx
+        dvy_dy += wy[k] * ry
+    return dvx_dx, dvy_dx, dvx_dy, dvy_dy
+
+
+@numba.njit(cache=True, inline="always")
+def _flat_force(element, n_local, connectivity, wx, wy, w_xx, w_yy, w_xy, force):
+    """One point's share of Eq. 11, ``-V sigma grad N``, scattered to its nodes."""
+    for k in range(n_local):
+        node = connectivity[element, k]
+        force[node, 0] -= wx[k] * w_xx + wy[k] * w_xy
+        force[node, 1] -= wx[k] * w_xy + wy[k] * w_yy
+
+
 @numba.njit(cache=True)
 def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                                     marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
@@ -130,29 +157,14 @@ def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_
     for p in range(x.shape[0]):
         element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
-        # dv_dx = dNdx @ v_rel: (d vx/dx, d vy/dx); dv_dy likewise
-        dvx_dx = 0.0
-        dvy_dx = 0.0
-        dvx_dy = 0.0
-        dvy_dy = 0.0
-        for k in range(n_local):
-            node = connectivity[element, k]
-            rx = relative[node, 0]
-            ry = relative[node, 1]
-            dvx_dx += wx[k] * rx
-            dvy_dx += wx[k] * ry
-            dvx_dy += wy[k] * rx
-            dvy_dy += wy[k] * ry
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy = _flat_gradient(element, n_local, connectivity, relative, wx, wy)
         s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, divergence)
         total += s_xx + s_yy + s_xy
         volume = mass_p[p] / density_p[p]
         w_xx = volume * s_xx
         w_yy = volume * s_yy
         w_xy = volume * s_xy
-        for k in range(n_local):
-            node = connectivity[element, k]
-            force[node, 0] -= wx[k] * w_xx + wy[k] * w_xy
-            force[node, 1] -= wx[k] * w_xy + wy[k] * w_yy
+        _flat_force(element, n_local, connectivity, wx, wy, w_xx, w_yy, w_xy, force)
     return total
 
 
@@ -167,18 +179,7 @@ def flat_velocity_gradient(x, velocity, v_ref, relative, dt,
     for p in range(x.shape[0]):
         element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
-        dvx_dx = 0.0
-        dvy_dx = 0.0
-        dvx_dy = 0.0
-        dvy_dy = 0.0
-        for k in range(n_local):
-            node = connectivity[element, k]
-            rx = relative[node, 0]
-            ry = relative[node, 1]
-            dvx_dx += wx[k] * rx
-            dvy_dx += wx[k] * ry
-            dvx_dy += wy[k] * rx
-            dvy_dy += wy[k] * ry
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy = _flat_gradient(element, n_local, connectivity, relative, wx, wy)
         strain_increment[p, 0] = dt * dvx_dx
         strain_increment[p, 1] = dt * dvy_dy
         strain_increment[p, 2] = dt * (0.5 * (dvx_dy + dvy_dx))
@@ -208,10 +209,7 @@ def flat_internal_force(x, mass_p, density_p, stress,
         w_yy = volume * stress[p, 1]
         w_xy = volume * stress[p, 2]
         total += stress[p, 0] + stress[p, 1] + stress[p, 2]
-        for k in range(n_local):
-            node = connectivity[element, k]
-            force[node, 0] -= wx[k] * w_xx + wy[k] * w_xy
-            force[node, 1] -= wx[k] * w_xy + wy[k] * w_yy
+        _flat_force(element, n_local, connectivity, wx, wy, w_xx, w_yy, w_xy, force)
     return total
 
 
