@@ -114,6 +114,34 @@ def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
 
 
 @numba.njit(cache=True, inline="always")
+def _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, divergence):
+    """Eq. 18 for any material: point p's strain increment (added to its strain),
+    ``dt L`` and ``div v``."""
+    strain_increment[p, 0] = dt * dvx_dx
+    strain_increment[p, 1] = dt * dvy_dy
+    strain_increment[p, 2] = dt * (0.5 * (dvx_dy + dvy_dx))
+    for c in range(3):
+        strain[p, c] += strain_increment[p, c]
+    gradient_increment[p, 0] = dt * dvx_dx
+    gradient_increment[p, 1] = dt * dvx_dy
+    gradient_increment[p, 2] = dt * dvy_dx
+    gradient_increment[p, 3] = dt * dvy_dy
+    divergence[p] = dvx_dx + dvy_dy
+
+
+@numba.njit(cache=True, inline="always")
+def _move_point(p, dt, ax, ay, ux, uy, v_ref, v, x, density_p, divergence):
+    """Eqs. 19-21 for point p from its interpolated acceleration (ax, ay) and
+    relative grid velocity (ux, uy).  Returns ``v_x + v_y + x + y``."""
+    v[p, 0] += dt * ax
+    v[p, 1] += dt * ay
+    x[p, 0] += dt * (ux + v_ref[0])
+    x[p, 1] += dt * (uy + v_ref[1])
+    density_p[p] *= math.exp(-dt * divergence[p])
+    return v[p, 0] + v[p, 1] + x[p, 0] + x[p, 1]
+
+
+@numba.njit(cache=True, inline="always")
 def _flat_gradient(element, n_local, connectivity, relative, wx, wy):
     """``dNdx @ v_rel`` and ``dNdy @ v_rel`` at one point: (d vx/dx, d vy/dx, d vx/dy, d vy/dy)."""
     dvx_dx = 0.0
@@ -180,16 +208,7 @@ def flat_velocity_gradient(x, velocity, v_ref, relative, dt,
         element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy = _flat_gradient(element, n_local, connectivity, relative, wx, wy)
-        strain_increment[p, 0] = dt * dvx_dx
-        strain_increment[p, 1] = dt * dvy_dy
-        strain_increment[p, 2] = dt * (0.5 * (dvx_dy + dvy_dx))
-        for c in range(3):
-            strain[p, c] += strain_increment[p, c]
-        gradient_increment[p, 0] = dt * dvx_dx
-        gradient_increment[p, 1] = dt * dvx_dy
-        gradient_increment[p, 2] = dt * dvy_dx
-        gradient_increment[p, 3] = dt * dvy_dy
-        divergence[p] = dvx_dx + dvy_dy
+        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, divergence)
 
 
 @numba.njit(cache=True)
@@ -234,12 +253,7 @@ def flat_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
             ay += w[k] * acceleration[node, 1]
             ux += w[k] * relative[node, 0]
             uy += w[k] * relative[node, 1]
-        v[p, 0] += dt * ax
-        v[p, 1] += dt * ay
-        x[p, 0] += dt * (ux + v_ref[0])
-        x[p, 1] += dt * (uy + v_ref[1])
-        density_p[p] *= math.exp(-dt * divergence[p])
-        total += v[p, 0] + v[p, 1] + x[p, 0] + x[p, 1]
+        total += _move_point(p, dt, ax, ay, ux, uy, v_ref, v, x, density_p, divergence)
     return total
 
 
@@ -412,16 +426,7 @@ def tensor_velocity_gradient(x, velocity, v_ref, relative, dt,
         element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
                                                    factors_x, table_x, factors_y, table_y)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
-        strain_increment[p, 0] = dt * dvx_dx
-        strain_increment[p, 1] = dt * dvy_dy
-        strain_increment[p, 2] = dt * (0.5 * (dvx_dy + dvy_dx))
-        for c in range(3):
-            strain[p, c] += strain_increment[p, c]
-        gradient_increment[p, 0] = dt * dvx_dx
-        gradient_increment[p, 1] = dt * dvx_dy
-        gradient_increment[p, 2] = dt * dvy_dx
-        gradient_increment[p, 3] = dt * dvy_dy
-        divergence[p] = dvx_dx + dvy_dy
+        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, divergence)
 
 
 @numba.njit(cache=True)
@@ -470,10 +475,5 @@ def tensor_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
             ay += fx[i] * say
             ux += fx[i] * sux
             uy += fx[i] * suy
-        v[p, 0] += dt * ax
-        v[p, 1] += dt * ay
-        x[p, 0] += dt * (ux + v_ref[0])
-        x[p, 1] += dt * (uy + v_ref[1])
-        density_p[p] *= math.exp(-dt * divergence[p])
-        total += v[p, 0] + v[p, 1] + x[p, 0] + x[p, 1]
+        total += _move_point(p, dt, ax, ay, ux, uy, v_ref, v, x, density_p, divergence)
     return total
