@@ -64,6 +64,7 @@ class BasisTables:
     terms: np.ndarray
     term_weights: np.ndarray
     connectivity: np.ndarray
+    uniform: np.ndarray
     tensor: "TensorTables | None" = None
 
     @property
@@ -73,7 +74,7 @@ class BasisTables:
     def arrays(self) -> tuple:
         """The arrays of the flat (any basis) kernels, in the order they take them."""
         return (self.marker, self.geometry, self.n_elements, self.factors_x, self.table_x, self.factors_y,
-                self.table_y, self.terms, self.term_weights, self.connectivity)
+                self.table_y, self.uniform, self.terms, self.term_weights, self.connectivity)
 
 
 @dataclass(frozen=True)
@@ -85,6 +86,12 @@ class TensorTables:
     unrolled loops over its ``n1 x n1`` nodes and sum factorization.
     ``order[s]`` is the grid's local index of tensor slot ``s``;
     ``connectivity`` is the grid's, permuted to tensor order.
+    ``uniform = (first_x, last_x, first_y, last_y)``: the cell columns
+    ``first_x..last_x`` (rows ``first_y..last_y``) all use the table of
+    ``first_x`` (``first_y``), which the kernels load once into registers
+    (every cell for Lagrange bases and ghost-node splines, the interior for
+    open-knot splines); a per-point table lookup made the transfers ~1.7x
+    slower.
     """
 
     marker: tuple
@@ -96,10 +103,11 @@ class TensorTables:
     table_y: np.ndarray
     connectivity: np.ndarray
     order: np.ndarray
+    uniform: np.ndarray
 
     def arrays(self) -> tuple:
         return (self.marker, self.geometry, self.n_elements, self.factors_x, self.table_x, self.factors_y,
-                self.table_y, self.connectivity)
+                self.table_y, self.uniform, self.connectivity)
 
 
 def separated_tables(grid) -> BasisTables:
@@ -132,11 +140,13 @@ def separated_tables(grid) -> BasisTables:
     tensor = _tensor_form(factors_x, factors_y, terms, weights)
     if tensor is not None:
         fx, fy, order = tensor
+        uniform = np.array([*_uniform_run(fx, table_x), *_uniform_run(fy, table_y)], dtype=np.int64)
         tensor = TensorTables((0,) * fx.shape[1], geometry, n_elements, fx, table_x, fy, table_y,
-                              np.ascontiguousarray(connectivity[:, order]), order)
+                              np.ascontiguousarray(connectivity[:, order]), order, uniform)
     factors_x, factors_y, terms, weights = flat
+    uniform = np.array([*_uniform_run(factors_x, table_x), *_uniform_run(factors_y, table_y)], dtype=np.int64)
     return BasisTables((0,) * factors_x.shape[1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
-                       terms, weights, connectivity, tensor)
+                       terms, weights, connectivity, uniform, tensor)
 
 
 def _lagrange_expansion(local: LocalPolynomials):
@@ -163,6 +173,19 @@ def _lagrange_expansion(local: LocalPolynomials):
         slots[k, : len(nonzero)] = nonzero
         weights[k, : len(nonzero)] = expansion[nonzero, k]
     return lagrange[None].copy(), lagrange[None].copy(), slots, weights
+
+
+def _uniform_run(factors, table):
+    """``(first, last)``: the longest run of consecutive cells whose tables are equal."""
+    tables = factors[table]
+    same = np.all(tables[1:] == tables[:-1], axis=(1, 2))
+    best, start = (0, 0), 0
+    for cell in range(1, len(table) + 1):
+        if cell == len(table) or not same[cell - 1]:
+            if cell - 1 - start > best[1] - best[0]:
+                best = (start, cell - 1)
+            start = cell
+    return best
 
 
 def _tensor_form(factors_x, factors_y, terms, weights):
@@ -236,38 +259,11 @@ def _skeleton_terms(local: LocalPolynomials):
 # -- kernels -------------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True)
-def locate_point(px, py, geometry, n_elements):
-    """Element and cell coordinates of one point, as :meth:`Grid.locate`; element -1 if outside."""
-    if not (px >= geometry[0] and px <= geometry[2] and py >= geometry[1] and py <= geometry[3]):
-        return -1, 0.0, 0.0, 0, 0
-    sx = (px - geometry[0]) * geometry[4]
-    sy = (py - geometry[1]) * geometry[4]
-    ix = min(np.int32(sx), np.int32(n_elements[0] - 1))
-    iy = min(np.int32(sy), np.int32(n_elements[1] - 1))
-    return ix * np.int32(n_elements[1]) + iy, sx - ix, sy - iy, ix, iy
-
-
-@numba.njit(cache=True)
-def _factors(s, factors, table, values, slopes):
-    """Values and slopes of the 1D factors of one table at s (Horner)."""
-    n_factors, n_powers = factors.shape[1], factors.shape[2]
-    for i in range(n_factors):
-        value = factors[table, i, n_powers - 1]
-        slope = 0.0
-        for a in range(n_powers - 2, -1, -1):
-            slope = slope * s + value
-            value = value * s + factors[table, i, a]
-        values[i] = value
-        slopes[i] = slope
-
-
 @numba.njit(cache=True, inline="always")
-def evaluate_point(px, py, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
+def evaluate_point(px, py, constants, marker, factors_x, table_x, factors_y, table_y, terms, term_weights,
                    q, qx, qy, unused, w, wx, wy):
     """Shape functions of one point into ``w, wx, wy`` (n_local); returns its element (-1 if outside)."""
-    element, fx, dfx, fy, dfy = tensor_weights(px, py, marker, geometry, n_elements, factors_x, table_x,
-                                               factors_y, table_y)
+    element, fx, dfx, fy, dfy = tensor_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y)
     if element < 0:
         return element
     n1 = len(marker)
@@ -301,17 +297,17 @@ def scratch(factors_x, factors_y, n_local):
 
 
 @numba.njit(cache=True)
-def shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
-                        connectivity,
-                        values, d_x, d_y, nodes):
+def shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms,
+                        term_weights, connectivity, values, d_x, d_y, nodes):
     """``N, dNdx, dNdy`` of every point as fixed-width rows (n, n_local), and their nodes.
 
     Returns the first point outside the grid, or -1.
     """
     n_local = connectivity.shape[1]
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+        element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         if element < 0:
             return p
@@ -326,69 +322,119 @@ def shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, fac
 # -- tensor-product kernels: loops over n1 x n1 nodes unrolled at compile time ---------------------------
 
 
-def factors_1d(s, factors, table, scale, marker):  # pragma: no cover - replaced by the overload in numba
-    """Values and slopes (times ``scale``) of the ``len(marker)`` 1D factors at s, as tuples."""
+def load_table(factors, table, marker):  # pragma: no cover - replaced by the overload in numba
+    """The coefficients ``factors[table]`` as a nested tuple (``len(marker)`` factors)."""
+    raise NotImplementedError("only callable from compiled code")
+
+
+@overload(load_table, inline="always")
+def _load_table(factors, table, marker):
+    n1 = len(marker.types)
+    if n1 == 2:
+        def linear(factors, table, marker):
+            c = factors
+            t = table
+            return ((c[t, 0, 0], c[t, 0, 1]), (c[t, 1, 0], c[t, 1, 1]))
+        return linear
+    if n1 == 3:
+        def quadratic(factors, table, marker):
+            c = factors
+            t = table
+            return ((c[t, 0, 0], c[t, 0, 1], c[t, 0, 2]), (c[t, 1, 0], c[t, 1, 1], c[t, 1, 2]),
+                    (c[t, 2, 0], c[t, 2, 1], c[t, 2, 2]))
+        return quadratic
+    if n1 == 4:
+        def cubic(factors, table, marker):
+            c = factors
+            t = table
+            return ((c[t, 0, 0], c[t, 0, 1], c[t, 0, 2], c[t, 0, 3]), (c[t, 1, 0], c[t, 1, 1], c[t, 1, 2], c[t, 1, 3]),
+                    (c[t, 2, 0], c[t, 2, 1], c[t, 2, 2], c[t, 2, 3]), (c[t, 3, 0], c[t, 3, 1], c[t, 3, 2], c[t, 3, 3]))
+        return cubic
+    return None
+
+
+def factors_1d(s, c, scale):  # pragma: no cover - replaced by the overload in numba
+    """Values and slopes (times ``scale``) of the 1D factors with coefficients ``c`` at s, as tuples."""
     raise NotImplementedError("only callable from compiled code")
 
 
 @overload(factors_1d, inline="always")
-def _factors_1d(s, factors, table, scale, marker):
-    n1 = len(marker.types)
+def _factors_1d(s, c, scale):
+    n1 = len(c.types) if hasattr(c, "types") else c.count
     if n1 == 2:
-        def linear(s, factors, table, scale, marker):
-            c = factors
-            t = table
-            return ((c[t, 0, 1] * s + c[t, 0, 0], c[t, 1, 1] * s + c[t, 1, 0]),
-                    (c[t, 0, 1] * scale, c[t, 1, 1] * scale))
+        def linear(s, c, scale):
+            return ((c[0][1] * s + c[0][0], c[1][1] * s + c[1][0]),
+                    (c[0][1] * scale, c[1][1] * scale))
         return linear
     if n1 == 3:
-        def quadratic(s, factors, table, scale, marker):
-            c = factors
-            t = table
-            return (((c[t, 0, 2] * s + c[t, 0, 1]) * s + c[t, 0, 0],
-                     (c[t, 1, 2] * s + c[t, 1, 1]) * s + c[t, 1, 0],
-                     (c[t, 2, 2] * s + c[t, 2, 1]) * s + c[t, 2, 0]),
-                    ((2.0 * c[t, 0, 2] * s + c[t, 0, 1]) * scale,
-                     (2.0 * c[t, 1, 2] * s + c[t, 1, 1]) * scale,
-                     (2.0 * c[t, 2, 2] * s + c[t, 2, 1]) * scale))
+        def quadratic(s, c, scale):
+            return (((c[0][2] * s + c[0][1]) * s + c[0][0],
+                     (c[1][2] * s + c[1][1]) * s + c[1][0],
+                     (c[2][2] * s + c[2][1]) * s + c[2][0]),
+                    ((2.0 * c[0][2] * s + c[0][1]) * scale,
+                     (2.0 * c[1][2] * s + c[1][1]) * scale,
+                     (2.0 * c[2][2] * s + c[2][1]) * scale))
         return quadratic
     if n1 == 4:
-        def cubic(s, factors, table, scale, marker):
-            c = factors
-            t = table
-            return ((((c[t, 0, 3] * s + c[t, 0, 2]) * s + c[t, 0, 1]) * s + c[t, 0, 0],
-                     ((c[t, 1, 3] * s + c[t, 1, 2]) * s + c[t, 1, 1]) * s + c[t, 1, 0],
-                     ((c[t, 2, 3] * s + c[t, 2, 2]) * s + c[t, 2, 1]) * s + c[t, 2, 0],
-                     ((c[t, 3, 3] * s + c[t, 3, 2]) * s + c[t, 3, 1]) * s + c[t, 3, 0]),
-                    (((3.0 * c[t, 0, 3] * s + 2.0 * c[t, 0, 2]) * s + c[t, 0, 1]) * scale,
-                     ((3.0 * c[t, 1, 3] * s + 2.0 * c[t, 1, 2]) * s + c[t, 1, 1]) * scale,
-                     ((3.0 * c[t, 2, 3] * s + 2.0 * c[t, 2, 2]) * s + c[t, 2, 1]) * scale,
-                     ((3.0 * c[t, 3, 3] * s + 2.0 * c[t, 3, 2]) * s + c[t, 3, 1]) * scale))
+        def cubic(s, c, scale):
+            return ((((c[0][3] * s + c[0][2]) * s + c[0][1]) * s + c[0][0],
+                     ((c[1][3] * s + c[1][2]) * s + c[1][1]) * s + c[1][0],
+                     ((c[2][3] * s + c[2][2]) * s + c[2][1]) * s + c[2][0],
+                     ((c[3][3] * s + c[3][2]) * s + c[3][1]) * s + c[3][0]),
+                    (((3.0 * c[0][3] * s + 2.0 * c[0][2]) * s + c[0][1]) * scale,
+                     ((3.0 * c[1][3] * s + 2.0 * c[1][2]) * s + c[1][1]) * scale,
+                     ((3.0 * c[2][3] * s + 2.0 * c[2][2]) * s + c[2][1]) * scale,
+                     ((3.0 * c[3][3] * s + 2.0 * c[3][2]) * s + c[3][1]) * scale))
         return cubic
     return None
 
 
 @numba.njit(cache=True, inline="always")
-def tensor_weights(px, py, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y):
-    """Element (-1 if outside) and the 1D factors ``(fx, dfx, fy, dfy)`` of one point."""
-    element, xi, eta, ix, iy = locate_point(px, py, geometry, n_elements)
-    if element < 0:
+def tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform):
+    """What every point of a tensor kernel needs, loaded once before the loop over points
+    (locals stay in registers; array reads would be repeated per point, as the
+    grid stores might alias them): geometry, cell counts, uniform runs and their tables."""
+    return (geometry[0], geometry[1], geometry[2], geometry[3], geometry[4], n_elements[0], n_elements[1],
+            uniform[0], uniform[1], uniform[2], uniform[3],
+            load_table(factors_x, table_x[uniform[0]], marker), load_table(factors_y, table_y[uniform[2]], marker))
+
+
+@numba.njit(cache=True, inline="always")
+def tensor_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y):
+    """Element (-1 if outside) and the 1D factors ``(fx, dfx, fy, dfy)`` of one point.
+
+    Located as :meth:`Grid.locate` does (same arithmetic, so the same cell and
+    cell coordinates bit for bit); an outside point gets element -1 and the
+    factors of a clamped cell.
+    """
+    lower_x, lower_y, upper_x, upper_y, scale, n_x, n_y, first_x, last_x, first_y, last_y, uniform_x, uniform_y = constants
+    inside = px >= lower_x and px <= upper_x and py >= lower_y and py <= upper_y
+    sx = (px - lower_x) * scale
+    sy = (py - lower_y) * scale
+    ix = min(np.int32(sx), np.int32(n_x - 1))
+    iy = min(np.int32(sy), np.int32(n_y - 1))
+    xi = sx - ix
+    eta = sy - iy
+    if not inside:
         ix = 0
         iy = 0
-    scale = geometry[4]
-    fx, dfx = factors_1d(xi, factors_x, table_x[ix], scale, marker)
-    fy, dfy = factors_1d(eta, factors_y, table_y[iy], scale, marker)
+    cx = uniform_x if first_x <= ix <= last_x else load_table(factors_x, table_x[ix], marker)
+    cy = uniform_y if first_y <= iy <= last_y else load_table(factors_y, table_y[iy], marker)
+    fx, dfx = factors_1d(xi, cx, scale)
+    fy, dfy = factors_1d(eta, cy, scale)
+    element = ix * np.int32(n_y) + iy if inside else -1
     return element, fx, dfx, fy, dfy
 
 
 @numba.njit(cache=True)
-def tensor_shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+def tensor_shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
                                connectivity, order, values, d_x, d_y, nodes):
     """:func:`shape_function_data` for tensor bases, in the grid's local order."""
     n1 = len(marker)
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
-                                                   factors_x, table_x, factors_y, table_y)
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x,
+                                                   factors_y, table_y)
         if element < 0:
             return p
         for i in range(n1):

@@ -36,7 +36,7 @@ def _sum_parts(parts, out):
 
 @numba.njit(cache=True, parallel=True)
 def parallel_p2g(x, v, mass_p, density_p, v_ref, signed,
-                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity,
+                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
                  grid_mass, grid_absolute, momentum, mass_parts, absolute_parts, momentum_parts):
     """:func:`tensor_p2g` (lumped) over chunks of points; returns the first point outside, or -1."""
     n_chunks = mass_parts.shape[0]
@@ -49,7 +49,7 @@ def parallel_p2g(x, v, mass_p, density_p, v_ref, signed,
     for chunk in prange(n_chunks):
         start, stop = _bounds(chunk, n_chunks, n)
         found = tensor_p2g(x[start:stop], v[start:stop], mass_p[start:stop], density_p[start:stop], v_ref, signed,
-                           False, False, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                           False, False, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
                            connectivity, mass_parts[chunk], absolute_parts[chunk], no_volume, momentum_parts[chunk],
                            no_index, no_table, no_table, no_matrix)
         if found >= 0:
@@ -66,7 +66,7 @@ def parallel_p2g(x, v, mass_p, density_p, v_ref, signed,
 
 @numba.njit(cache=True, parallel=True)
 def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
-                              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity,
+                              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
                               strain, stress, force, divergence, force_parts, relative_parts):
     """:func:`tensor_linear_elastic_stress_and_force` over chunks of points."""
     n_chunks = force_parts.shape[0]
@@ -76,7 +76,7 @@ def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_
         start, stop = _bounds(chunk, n_chunks, n)
         totals[chunk] = tensor_linear_elastic_stress_and_force(
             x[start:stop], velocity, v_ref, relative_parts[chunk], dt, mass_p[start:stop], density_p[start:stop],
-            body[start:stop], lame, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+            body[start:stop], lame, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
             connectivity, strain[start:stop], stress[start:stop], force_parts[chunk], divergence[start:stop])
     _sum_parts(force_parts, force)
     relative[:] = relative_parts[0]
@@ -88,7 +88,7 @@ def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_
 
 @numba.njit(cache=True, parallel=True)
 def parallel_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
-                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity, n_chunks):
+                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity, n_chunks):
     """:func:`tensor_g2p` over chunks of points (no scatter: nothing to combine but the checksum)."""
     n = x.shape[0]
     totals = np.zeros(n_chunks)
@@ -96,7 +96,7 @@ def parallel_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
         start, stop = _bounds(chunk, n_chunks, n)
         totals[chunk] = tensor_g2p(x[start:stop], v[start:stop], density_p[start:stop], acceleration, relative, v_ref,
                                    dt, divergence[start:stop], marker, geometry, n_elements, factors_x, table_x,
-                                   factors_y, table_y, connectivity)
+                                   factors_y, table_y, uniform, connectivity)
     total = 0.0
     for chunk in range(n_chunks):
         total += totals[chunk]

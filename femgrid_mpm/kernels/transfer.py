@@ -31,7 +31,7 @@ import math
 import numba
 import numpy as np
 
-from .basis import evaluate_point, scratch, tensor_weights
+from .basis import evaluate_point, scratch, tensor_constants, tensor_weights
 
 OUTSIDE = -1
 
@@ -70,7 +70,7 @@ def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, str
 
 @numba.njit(cache=True)
 def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
-        marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity,
+        marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights, connectivity,
         grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, slots, matrix):
     """Scatter mass, relative momentum (and the mass matrix, into the fixed
     pattern of :mod:`.pattern`) to the grid.
@@ -87,8 +87,9 @@ def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
         grid_volume[:] = 0.0
     if assemble:
         matrix[:] = 0.0
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+        element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         if element < 0:
             return p
@@ -170,7 +171,7 @@ def _flat_force(element, n_local, connectivity, wx, wy, w_xx, w_yy, w_xy, force)
 
 @numba.njit(cache=True)
 def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
-                                    marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                                    marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
                                     terms, term_weights, connectivity, strain, stress, force, divergence):
     """Eqs. 18, 6 and 11 in one pass, for bodies of :class:`LinearElastic` material.
 
@@ -182,8 +183,9 @@ def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     force[:] = 0.0
     total = 0.0
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+        element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy = _flat_gradient(element, n_local, connectivity, relative, wx, wy)
         s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, divergence)
@@ -198,14 +200,15 @@ def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_
 
 @numba.njit(cache=True)
 def flat_velocity_gradient(x, velocity, v_ref, relative, dt,
-                      marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
+                      marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights,
                       connectivity, strain, strain_increment, gradient_increment, divergence):
     """Eq. 18 for any material: the strain increment (added to ``strain``) and ``dt L``."""
     _relative_velocity(velocity, v_ref, relative)
     n_local = connectivity.shape[1]
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+        element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy = _flat_gradient(element, n_local, connectivity, relative, wx, wy)
         _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, divergence)
@@ -213,15 +216,16 @@ def flat_velocity_gradient(x, velocity, v_ref, relative, dt,
 
 @numba.njit(cache=True)
 def flat_internal_force(x, mass_p, density_p, stress,
-                   marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights,
+                   marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights,
                    connectivity, force):
     """Eq. 11: ``f_I = -sum_p V_p sigma_p grad N_I`` with the volumes of time t."""
     n_local = connectivity.shape[1]
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     force[:] = 0.0
     total = 0.0
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+        element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         volume = mass_p[p] / density_p[p]
         w_xx = volume * stress[p, 0]
@@ -234,14 +238,15 @@ def flat_internal_force(x, mass_p, density_p, stress,
 
 @numba.njit(cache=True)
 def flat_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
-        marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, terms, term_weights, connectivity):
+        marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights, connectivity):
     """Eqs. 19-21: point velocity from the grid acceleration, position from the
     grid velocity of the step's start, density.  Returns ``sum(v) + sum(x)``."""
     n_local = connectivity.shape[1]
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     total = 0.0
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+        element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         ax = 0.0
         ay = 0.0
@@ -291,7 +296,7 @@ def lumped_grid_velocity(grid_mass, grid_absolute, signed, reference_mass, momen
 
 @numba.njit(cache=True)
 def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
-               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity,
+               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
                grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, slots, matrix):
     """:func:`flat_p2g` for tensor-product bases (``slots`` in tensor order)."""
     n1 = len(marker)
@@ -303,9 +308,9 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
         grid_volume[:] = 0.0
     if assemble:
         matrix[:] = 0.0
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
-                                                   factors_x, table_x, factors_y, table_y)
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         if element < 0:
             return p
         m = mass_p[p]
@@ -396,16 +401,16 @@ def _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, w_xx, w_yy, w_xy,
 
 @numba.njit(cache=True)
 def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
-                                           marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                                           marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
                                            connectivity, strain, stress, force, divergence):
     """:func:`flat_linear_elastic_stress_and_force` for tensor-product bases."""
     _relative_velocity(velocity, v_ref, relative)
     n1 = len(marker)
     force[:] = 0.0
     total = 0.0
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
-                                                   factors_x, table_x, factors_y, table_y)
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
         s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, divergence)
         total += s_xx + s_yy + s_xy
@@ -417,29 +422,29 @@ def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mas
 
 @numba.njit(cache=True)
 def tensor_velocity_gradient(x, velocity, v_ref, relative, dt,
-                             marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity,
+                             marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
                              strain, strain_increment, gradient_increment, divergence):
     """:func:`flat_velocity_gradient` for tensor-product bases."""
     _relative_velocity(velocity, v_ref, relative)
     n1 = len(marker)
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
-                                                   factors_x, table_x, factors_y, table_y)
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
         _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, divergence)
 
 
 @numba.njit(cache=True)
 def tensor_internal_force(x, mass_p, density_p, stress,
-                          marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity,
+                          marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
                           force):
     """:func:`flat_internal_force` for tensor-product bases."""
     n1 = len(marker)
     force[:] = 0.0
     total = 0.0
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
-                                                   factors_x, table_x, factors_y, table_y)
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         volume = mass_p[p] / density_p[p]
         total += stress[p, 0] + stress[p, 1] + stress[p, 2]
         _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, volume * stress[p, 0], volume * stress[p, 1],
@@ -449,13 +454,13 @@ def tensor_internal_force(x, mass_p, density_p, stress,
 
 @numba.njit(cache=True)
 def tensor_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
-               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, connectivity):
+               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity):
     """:func:`flat_g2p` for tensor-product bases."""
     n1 = len(marker)
     total = 0.0
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], marker, geometry, n_elements,
-                                                   factors_x, table_x, factors_y, table_y)
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         ax = 0.0
         ay = 0.0
         ux = 0.0
