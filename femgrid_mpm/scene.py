@@ -104,7 +104,7 @@ class SolverSpec(_Model):
     consistent_fallback: Literal["error", "blend"] = "error"
     blend: Annotated[float, Field(gt=0, le=1)] = 0.1
     weak_fraction: Annotated[float, Field(ge=0, lt=1)] = 0.01
-    cg_tolerance: Annotated[float, Field(gt=0, lt=1)] = 1e-10
+    cg_tolerance: Annotated[float, Field(gt=0, lt=1)] = 1e-6
     #: the step's transfers: compiled kernels, or scipy.sparse (the reference)
     engine: Literal["numba", "scipy"] = "numba"
     #: numba engine: threads for the tensor-product kernels (1: serial, reproducible bit for bit)
