@@ -8,7 +8,8 @@ always available for diagnostics.  What a model needs from the compiled
 P2G it says with ``assemble_sums`` (the sums; ``needs_volume`` adds
 ``N.T @ V_p``), ``assemble_pattern`` (the consistent matrix) or
 ``needs_matrices`` (N itself); a model with its own transfer weights
-exposes them as ``weights`` (:class:`HrzMass`).
+exposes them as ``weights`` (:class:`HrzMass`, whose sums the compiled P2G
+also makes: ``assemble_hrz``).
 
 Negative and tiny lumped masses (q2, serendipity) have two remedies here:
 the threshold of :class:`LumpedMass` (the absolute mass below a fraction of
@@ -226,19 +227,37 @@ class HrzMass:
     n_nodes: int
     reference_mass: float
     kind = "hrz"
-    #: the engine builds N and calls :meth:`assemble`; transfers use ``weights``
-    needs_matrices = True
+    #: W as a matrix: set by :meth:`assemble`; after :meth:`assemble_hrz` built
+    #: from N when first asked for (:meth:`weights_for`: only effects that
+    #: move point forces to the grid need it)
     weights: sp.csr_matrix | None = field(default=None, init=False, repr=False)
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
-        self.lumped = N.T @ m_p
         self.weights = positive_weights(N)
-        self.diagonal = self.weights.T @ m_p
+        self.assemble_hrz(N.T @ m_p, self.weights.T @ m_p)
+
+    def assemble_hrz(self, lumped: np.ndarray, diagonal: np.ndarray) -> None:
+        """The same from the sums the compiled P2G made: the row sums ``N.T @ m_p``
+        and the diagonal ``W.T @ m_p`` (kept, not copied); ``weights`` then waits
+        for :meth:`weights_for`."""
+        if self.weights is not None and self.weights.shape[1] != len(lumped):  # pragma: no cover - defensive
+            self.weights = None
+        self.lumped, self.diagonal = lumped, diagonal
         # no cancellation here (W >= 0): every node a point touches can be divided by.  A
         # cut-off like the row sums' 1e-12 would drop forces where W = N^2 is tiny and
         # grad N is not (cubic splines: a momentum leak of 1e-8 over the drifting bar)
         self.active = self.diagonal > 0.0
         self._inverse = np.divide(1.0, self.diagonal, out=np.zeros(self.n_nodes), where=self.active)
+
+    def weights_for(self, N: sp.csr_matrix) -> sp.csr_matrix:
+        """``W`` of this step's points, from their ``N`` if the P2G did not build it."""
+        if self.weights is None:
+            self.weights = positive_weights(N)
+        return self.weights
+
+    def forget_weights(self) -> None:
+        """The points moved: the next request rebuilds ``W``."""
+        self.weights = None
 
     def solve(self, rhs: np.ndarray, kind: str = "velocity") -> np.ndarray:
         """``rhs / m_i`` on active nodes, zero elsewhere."""

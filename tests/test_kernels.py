@@ -106,7 +106,7 @@ def assert_steps_agree(reference, compiled, steps, rtol=1e-12):
 
 
 @pytest.mark.filterwarnings("ignore::femgrid_mpm.diagnostics.NegativeMassWarning")
-@pytest.mark.parametrize("mass", ["lumped", "consistent"])
+@pytest.mark.parametrize("mass", ["lumped", "consistent", "hrz"])
 @pytest.mark.parametrize("basis", BASIS_NAMES)
 def test_engines_agree_per_step(basis, mass):
     reference = Simulation(block_scene(basis, mass, "scipy"))
@@ -114,10 +114,11 @@ def test_engines_agree_per_step(basis, mass):
     assert_steps_agree(reference, compiled, steps=8)
 
 
-@pytest.mark.parametrize("basis", ["q1", "bspline3"])
-def test_engines_agree_with_other_materials_and_every_effect(basis):
+@pytest.mark.parametrize("basis, mass", [("q1", "lumped"), ("bspline3", "lumped"), ("q2", "hrz"),
+                                         ("serendipity", "hrz")])
+def test_engines_agree_with_other_materials_and_every_effect(basis, mass):
     """Neo-Hookean (the general, non-fused path), gravity and a point load (which
-    read ctx.N), damping and supports."""
+    read ctx.N, or HRZ's weights built from it), damping and supports."""
     extra = dict(
         material={"model": "neo_hookean", "E": 1e4, "nu": 0.3, "density": 1e3},
         loads=[{"kind": "gravity", "acceleration": [0.0, -9.81]},
@@ -126,8 +127,8 @@ def test_engines_agree_with_other_materials_and_every_effect(basis):
         supports=[{"where": "x <= 0.5", "fix": ["x", "y"]}],
         output={"every": 2},
     )
-    reference = Simulation(block_scene(basis, "lumped", "scipy", **extra))
-    compiled = Simulation(block_scene(basis, "lumped", "numba", **extra))
+    reference = Simulation(block_scene(basis, mass, "scipy", **extra))
+    compiled = Simulation(block_scene(basis, mass, "numba", **extra))
     assert_steps_agree(reference, compiled, steps=6)
     np.testing.assert_allclose(compiled.energy.table()["total"], reference.energy.table()["total"], rtol=1e-10)
 

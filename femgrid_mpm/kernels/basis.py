@@ -389,6 +389,35 @@ def _factors_1d(s, c, scale):
     return None
 
 
+def normalized_squares(f):  # pragma: no cover - replaced by the overload in numba
+    """``f_i^2 / sum_j f_j^2`` of a tuple: the HRZ weights of one direction of a tensor basis."""
+    raise NotImplementedError("only callable from compiled code")
+
+
+@overload(normalized_squares, inline="always")
+def _normalized_squares(f):
+    n1 = f.count
+    if n1 == 2:
+        def linear(f):
+            a, b = f[0] * f[0], f[1] * f[1]
+            total = a + b
+            return (a / total, b / total)
+        return linear
+    if n1 == 3:
+        def quadratic(f):
+            a, b, c = f[0] * f[0], f[1] * f[1], f[2] * f[2]
+            total = a + b + c
+            return (a / total, b / total, c / total)
+        return quadratic
+    if n1 == 4:
+        def cubic(f):
+            a, b, c, d = f[0] * f[0], f[1] * f[1], f[2] * f[2], f[3] * f[3]
+            total = a + b + c + d
+            return (a / total, b / total, c / total, d / total)
+        return cubic
+    return None
+
+
 @numba.njit(cache=True, inline="always")
 def tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform):
     """What every point of a tensor kernel needs, loaded once before the loop over points

@@ -14,9 +14,11 @@ interface (``[solver] engine`` picks the implementation):
     19-21); returns ``sum(v) + sum(x) + sum(stress)`` for the finiteness check.
 
 A mass model with its own transfer weights (``mass.weights``, HRZ: see
-:class:`femgrid_mpm.mass.HrzMass`) is assembled from the matrices, and its
-weights replace ``N`` in the P2G momentum and the G2P velocity increment;
-gradients and positions keep ``N``.
+:class:`femgrid_mpm.mass.HrzMass`) has them replace ``N`` in the P2G
+momentum and the G2P velocity increment; gradients and positions keep
+``N``.  The compiled kernels compute the HRZ weights point by point; a
+model that needs the matrices themselves (``needs_matrices``) is assembled
+from them.
 
 :class:`ScipyTransfer` spells the paper's sparse linear algebra out with
 ``scipy.sparse`` matrices; :class:`CompiledTransfer` runs the kernels of
@@ -98,8 +100,11 @@ class CompiledTransfer:
         self.signed = not grid.nonnegative
         self.matrices = ShapeFunctionMatrices(grid, self.basis)
         n, n_nodes = simulation.particles.n, grid.n_nodes
+        # HRZ: the kernels weigh momentum and velocity increments by W = N^2 / sum N^2
+        self.hrz = hasattr(simulation.mass, "assemble_hrz")
         self.grid_mass = np.zeros(n_nodes)
-        self.grid_absolute = np.zeros(n_nodes if self.signed else 1)
+        # |N|.T @ m_p (signed bases), or the HRZ diagonal W.T @ m_p
+        self.grid_absolute = np.zeros(n_nodes if self.signed or self.hrz else 1)
         # N.T @ V_p: consistent mass (weak nodes) and the lumped mass threshold
         self.want_volume = bool(getattr(simulation.mass, "needs_volume", False))
         self.grid_volume = np.zeros(n_nodes if self.want_volume else 1)
@@ -139,19 +144,21 @@ class CompiledTransfer:
     def to_grid(self, ctx: StepContext, mass) -> np.ndarray:
         p = ctx.particles
         self.matrices.invalidate()
+        if self.hrz:
+            mass.forget_weights()
         if self.from_matrices:  # N built by the kernel (ValueError if a point left the grid), then scipy products
             mass.assemble(ctx.N, p.mass, p.volume)
             return ctx.transfer_weights.T @ (p.mass[:, None] * (p.v - ctx.frame_velocity))
         momentum = np.empty((self.grid.n_nodes, 2))
         pattern = self.pattern
-        if self.threads > 1 and pattern is None and not self.want_volume:
+        if self.threads > 1 and pattern is None and not self.want_volume and not self.hrz:
             outside = parallel.parallel_p2g(
                 p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, *self._arrays, self.grid_mass,
                 self.grid_absolute, momentum, self._mass_parts, self._absolute_parts, self._momentum_parts)
         else:
             outside = self._p2g(
                 p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, self.want_volume, pattern is not None,
-                *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum,
+                self.hrz, *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum,
                 *(self._no_pattern if pattern is None else (pattern.indptr, pattern.rank, pattern.slots, pattern.data)),
             )
         if outside >= 0:
@@ -159,6 +166,8 @@ class CompiledTransfer:
             raise AssertionError(f"point {outside} is outside the grid")  # pragma: no cover
         if pattern is not None:  # consistent: M assembled into the pattern
             mass.assemble_pattern(pattern, self.grid_mass, self.grid_volume)
+        elif self.hrz:
+            mass.assemble_hrz(self.grid_mass, self.grid_absolute)
         elif hasattr(mass, "assemble_sums"):
             mass.assemble_sums(self.grid_mass, self.grid_absolute if self.signed else None,
                                self.grid_volume if self.want_volume else None)
@@ -196,12 +205,12 @@ class CompiledTransfer:
         # own transfer weights: the kernel moves the points (N) with no acceleration, W carries it after
         acceleration = self._no_acceleration if self.from_matrices else ctx.acceleration
         increment = dt * (ctx.transfer_weights @ ctx.acceleration) if self.from_matrices else None
-        if self.threads > 1:
+        if self.threads > 1 and not self.hrz:
             total = parallel.parallel_g2p(p.x, p.v, p.density, acceleration, self._relative, ctx.frame_velocity,
                                           dt, self.divergence, *self._arrays, self.threads)
         else:
             total = self._g2p(p.x, p.v, p.density, acceleration, self._relative, ctx.frame_velocity, dt,
-                              self.divergence, *self._arrays)
+                              self.divergence, self.hrz, *self._arrays)
         self.matrices.invalidate()  # the points moved
         if increment is not None:
             p.v += increment

@@ -49,7 +49,7 @@ def parallel_p2g(x, v, mass_p, density_p, v_ref, signed,
     for chunk in prange(n_chunks):
         start, stop = _bounds(chunk, n_chunks, n)
         found = tensor_p2g(x[start:stop], v[start:stop], mass_p[start:stop], density_p[start:stop], v_ref, signed,
-                           False, False, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
+                           False, False, False, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
                            connectivity, mass_parts[chunk], absolute_parts[chunk], no_volume, momentum_parts[chunk],
                            no_index, no_table, no_table, no_matrix)
         if found >= 0:
@@ -95,7 +95,7 @@ def parallel_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
     for chunk in prange(n_chunks):
         start, stop = _bounds(chunk, n_chunks, n)
         totals[chunk] = tensor_g2p(x[start:stop], v[start:stop], density_p[start:stop], acceleration, relative, v_ref,
-                                   dt, divergence[start:stop], marker, geometry, n_elements, factors_x, table_x,
+                                   dt, divergence[start:stop], False, marker, geometry, n_elements, factors_x, table_x,
                                    factors_y, table_y, uniform, connectivity)
     total = 0.0
     for chunk in range(n_chunks):

@@ -20,6 +20,13 @@ matters), so the two engines agree to rounding.
     ``v_p += dt N @ a``, ``x_p += dt (N @ v_rel + v_ref)``, ``rho_p *= exp(-dt div v)``
     (Eqs. 19-21).
 
+With ``hrz`` (``mass = "hrz"``, :class:`femgrid_mpm.mass.HrzMass`) the
+point's HRZ weights ``W = N^2 / sum N^2`` carry the momentum in P2G and the
+velocity increment in G2P, and P2G sums the HRZ diagonal ``W.T @ m_p`` into
+``grid_absolute`` (the row sums ``N.T @ m_p`` still go to ``grid_mass``).
+For a tensor basis the weights are themselves products,
+``W_ij = (U_i^2 / sum U^2) (W_j^2 / sum W^2)``.
+
 Every kernel is serial (``parallel`` variants are separate functions), uses
 ``fastmath=False`` and is cached on disk (``cache=True``).
 """
@@ -31,7 +38,7 @@ import math
 import numba
 import numpy as np
 
-from .basis import evaluate_point, scratch, tensor_constants, tensor_weights
+from .basis import evaluate_point, normalized_squares, scratch, tensor_constants, tensor_weights
 
 OUTSIDE = -1
 
@@ -69,7 +76,7 @@ def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, str
 
 
 @numba.njit(cache=True)
-def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
+def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
         marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights, connectivity,
         grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, slots, matrix):
     """Scatter mass, relative momentum (and the mass matrix, into the fixed
@@ -81,7 +88,7 @@ def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     grid_mass[:] = 0.0
     momentum[:] = 0.0
-    if signed:
+    if signed or hrz:
         grid_absolute[:] = 0.0
     if want_volume:
         grid_volume[:] = 0.0
@@ -97,6 +104,18 @@ def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
         px = m * (v[p, 0] - v_ref[0])
         py = m * (v[p, 1] - v_ref[1])
         volume = m / density_p[p]
+        if hrz:  # W = N^2 / sum N^2 carries the momentum; its column sums are the diagonal mass
+            squares = 0.0
+            for k in range(n_local):
+                squares += w[k] * w[k]
+            for k in range(n_local):
+                node = connectivity[element, k]
+                weight = w[k] * w[k] / squares
+                grid_mass[node] += w[k] * m
+                grid_absolute[node] += weight * m
+                momentum[node, 0] += weight * px
+                momentum[node, 1] += weight * py
+            continue
         for k in range(n_local):
             node = connectivity[element, k]
             grid_mass[node] += w[k] * m
@@ -237,7 +256,7 @@ def flat_internal_force(x, mass_p, density_p, stress,
 
 
 @numba.njit(cache=True)
-def flat_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
+def flat_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, hrz,
         marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights, connectivity):
     """Eqs. 19-21: point velocity from the grid acceleration, position from the
     grid velocity of the step's start, density.  Returns ``sum(v) + sum(x)``."""
@@ -252,10 +271,15 @@ def flat_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
         ay = 0.0
         ux = 0.0
         uy = 0.0
+        squares = 0.0
+        if hrz:
+            for k in range(n_local):
+                squares += w[k] * w[k]
         for k in range(n_local):
             node = connectivity[element, k]
-            ax += w[k] * acceleration[node, 0]
-            ay += w[k] * acceleration[node, 1]
+            weight = w[k] * w[k] / squares if hrz else w[k]  # what carries the velocity increment
+            ax += weight * acceleration[node, 0]
+            ay += weight * acceleration[node, 1]
             ux += w[k] * relative[node, 0]
             uy += w[k] * relative[node, 1]
         total += _move_point(p, dt, ax, ay, ux, uy, v_ref, v, x, density_p, divergence)
@@ -295,14 +319,14 @@ def lumped_grid_velocity(grid_mass, grid_absolute, signed, reference_mass, momen
 
 
 @numba.njit(cache=True)
-def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
+def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
                grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, slots, matrix):
     """:func:`flat_p2g` for tensor-product bases (``slots`` in tensor order)."""
     n1 = len(marker)
     grid_mass[:] = 0.0
     momentum[:] = 0.0
-    if signed:
+    if signed or hrz:
         grid_absolute[:] = 0.0
     if want_volume:
         grid_volume[:] = 0.0
@@ -317,7 +341,21 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble,
         px = m * (v[p, 0] - v_ref[0])
         py = m * (v[p, 1] - v_ref[1])
         volume = m / density_p[p]
-        if signed:  # also |N|.T @ m_p
+        if hrz:  # W_ij = gx_i gy_j carries the momentum; its column sums are the diagonal mass
+            gx = normalized_squares(fx)
+            gy = normalized_squares(fy)
+            for i in range(n1):
+                m_i = fx[i] * m
+                d_i = gx[i] * m
+                px_i = gx[i] * px
+                py_i = gx[i] * py
+                for j in range(n1):
+                    node = connectivity[element, i * n1 + j]
+                    grid_mass[node] += m_i * fy[j]
+                    grid_absolute[node] += d_i * gy[j]
+                    momentum[node, 0] += px_i * gy[j]
+                    momentum[node, 1] += py_i * gy[j]
+        elif signed:  # also |N|.T @ m_p
             for i in range(n1):
                 m_i = fx[i] * m
                 a_i = abs(fx[i]) * m
@@ -453,7 +491,7 @@ def tensor_internal_force(x, mass_p, density_p, stress,
 
 
 @numba.njit(cache=True)
-def tensor_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
+def tensor_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, hrz,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity):
     """:func:`flat_g2p` for tensor-product bases."""
     n1 = len(marker)
@@ -465,6 +503,9 @@ def tensor_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
         ay = 0.0
         ux = 0.0
         uy = 0.0
+        # what carries the velocity increment: N, or the HRZ weights
+        gx = normalized_squares(fx) if hrz else fx
+        gy = normalized_squares(fy) if hrz else fy
         for i in range(n1):
             sax = 0.0
             say = 0.0
@@ -472,12 +513,12 @@ def tensor_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
             suy = 0.0
             for j in range(n1):
                 node = connectivity[element, i * n1 + j]
-                sax += fy[j] * acceleration[node, 0]
-                say += fy[j] * acceleration[node, 1]
+                sax += gy[j] * acceleration[node, 0]
+                say += gy[j] * acceleration[node, 1]
                 sux += fy[j] * relative[node, 0]
                 suy += fy[j] * relative[node, 1]
-            ax += fx[i] * sax
-            ay += fx[i] * say
+            ax += gx[i] * sax
+            ay += gx[i] * say
             ux += fx[i] * sux
             uy += fx[i] * suy
         total += _move_point(p, dt, ax, ay, ux, uy, v_ref, v, x, density_p, divergence)
