@@ -10,8 +10,9 @@ cells wider on every side, with no declared effects; ``dt`` is a tenth of a
 cell's wave transit time.  Steps are timed after two warm-up steps (which
 also compile or load the kernels); the table reports the median time per
 step over the particles.  Targets of the issue at 1e5 particles with lumped
-mass: q1 <= 40 ns, bspline3 <= 120 ns, q2 and serendipity <= 80 ns;
-consistent mass <= 5x lumped; fixed cost <= 20 us per step; <= 1 KB per
+mass: q1 <= 40 ns, bspline3 <= 120 ns, q2 and serendipity <= 80 ns (with a
+remedy that lets them run: HRZ mass, ``mass = "hrz"``, is timed for every
+basis); consistent mass <= 5x lumped; fixed cost <= 20 us per step; <= 1 KB per
 particle.
 
 * fixed cost: time per step of a 16-point block (2 x 2 cells), lumped mass.
@@ -50,10 +51,12 @@ from femgrid_mpm.scene import Scene, bundled_scene  # noqa: E402
 from femgrid_mpm.solver import Simulation  # noqa: E402
 
 BASES = ("q1", "q2", "serendipity", "bspline3")
-MASSES = ("lumped", "consistent")
+MASSES = ("lumped", "hrz", "consistent")
 SIZES = (1_000, 10_000, 100_000)
 PAPER_CASES = ("vibrating_bar", "cantilever", "box_impact")
 TARGET_LUMPED = {"q1": 40, "q2": 80, "serendipity": 80, "bspline3": 120}
+#: bases whose row-sum masses can be negative: their target holds "with a remedy that lets them run" (HRZ)
+REMEDIED = ("q2", "serendipity")
 
 
 def block_scene(basis: str, mass: str, n_points: int, engine: str = "numba") -> Scene:
@@ -187,7 +190,9 @@ def main(argv=None) -> None:
         for mass in MASSES:
             cells = " | ".join(f"{table[basis, mass, n]:.0f}" for n in sizes)
             ratio = table[basis, "consistent", sizes[-1]] / table[basis, "lumped", sizes[-1]]
-            target = f"<= {TARGET_LUMPED[basis]} ns" if mass == "lumped" else "<= 5x lumped"
+            target = {"lumped": f"<= {TARGET_LUMPED[basis]} ns",
+                      "hrz": f"<= {TARGET_LUMPED[basis]} ns (the remedy)" if basis in REMEDIED else "",
+                      "consistent": "<= 5x lumped"}[mass]
             print(f"| {basis} | {mass} | {cells} | {ratio:.1f}x | {target} |" if mass == "consistent"
                   else f"| {basis} | {mass} | {cells} | | {target} |")
 

@@ -66,6 +66,7 @@ class BasisTables:
     connectivity: np.ndarray
     uniform: np.ndarray
     tensor: "TensorTables | None" = None
+    folded: "FoldedTables | None" = None
 
     @property
     def n_local(self) -> int:
@@ -110,6 +111,62 @@ class TensorTables:
                 self.table_y, self.uniform, self.connectivity)
 
 
+@dataclass(frozen=True)
+class FoldedTables:
+    """Tensor-product functions plus a share of the centre one (serendipity), for the folded kernels.
+
+    Local function k is ``q_(s_k) + fold[s_k] q_c`` with
+    ``q_(i n1 + j) = U_i(xi) W_j(eta)`` and ``c = (n1 n1) // 2`` the centre
+    slot, which is no function of its own: serendipity's corner functions
+    are their Q2 functions minus a quarter of the centre bubble, the
+    mid-side ones plus half of it.  The kernels evaluate the ``n1 x n1``
+    products in registers and fold the centre in (no scratch arrays), so
+    serendipity runs at about q2's speed; consistent mass stays with the
+    flat kernels.  ``connectivity`` is in slot order (the centre slot holds a
+    node of the element that is never touched), ``order[s]`` the grid's
+    local index of slot s (-1 for the centre).
+    """
+
+    marker: tuple
+    geometry: np.ndarray
+    n_elements: np.ndarray
+    factors_x: np.ndarray
+    table_x: np.ndarray
+    factors_y: np.ndarray
+    table_y: np.ndarray
+    uniform: np.ndarray
+    fold: tuple
+    connectivity: np.ndarray
+    order: np.ndarray
+
+    def arrays(self) -> tuple:
+        return (self.marker, self.geometry, self.n_elements, self.factors_x, self.table_x, self.factors_y,
+                self.table_y, self.uniform, self.fold, self.connectivity)
+
+
+def _folded_form(factors_x, factors_y, terms, weights, connectivity):
+    """``(fold, connectivity, order)`` if every function is one product with
+    weight 1 plus a multiple of the centre product (odd ``n1``), else None."""
+    n1 = factors_x.shape[1]
+    centre = (n1 * n1) // 2
+    if n1 % 2 == 0 or factors_y.shape[1] != n1:
+        return None
+    fold = np.zeros(n1 * n1)
+    order = np.full(n1 * n1, -1, dtype=np.int64)
+    for k in range(len(terms)):
+        own = [s for s, c in zip(terms[k], weights[k]) if c == 1.0 and s != centre]
+        others = [(s, c) for s, c in zip(terms[k], weights[k]) if c != 0.0 and s != (own[0] if own else -1)]
+        if len(own) != 1 or order[own[0]] >= 0 or any(s != centre for s, _ in others):
+            return None
+        order[own[0]] = k
+        fold[own[0]] = sum(c for _, c in others)
+    if np.count_nonzero(order >= 0) != n1 * n1 - 1:
+        return None
+    fold[centre] = -1.0  # q_c - q_c: the centre slot's weight is exactly zero
+    slots = np.where(order >= 0, order, 0)
+    return tuple(float(c) for c in fold), np.ascontiguousarray(connectivity[:, slots]), order
+
+
 def separated_tables(grid) -> BasisTables:
     """The separated form of ``grid``'s basis (see the module docstring)."""
     d = grid.discretization
@@ -145,8 +202,13 @@ def separated_tables(grid) -> BasisTables:
                               np.ascontiguousarray(connectivity[:, order]), order, uniform)
     factors_x, factors_y, terms, weights = flat
     uniform = np.array([*_uniform_run(factors_x, table_x), *_uniform_run(factors_y, table_y)], dtype=np.int64)
+    folded = None if tensor is not None else _folded_form(factors_x, factors_y, terms, weights, connectivity)
+    if folded is not None:
+        fold, folded_connectivity, order = folded
+        folded = FoldedTables((0,) * factors_x.shape[1], geometry, n_elements, factors_x, table_x, factors_y,
+                              table_y, uniform, fold, folded_connectivity, order)
     return BasisTables((0,) * factors_x.shape[1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
-                       terms, weights, connectivity, uniform, tensor)
+                       terms, weights, connectivity, uniform, tensor, folded)
 
 
 def _lagrange_expansion(local: LocalPolynomials):
@@ -416,6 +478,31 @@ def _normalized_squares(f):
             return (a / total, b / total, c / total, d / total)
         return cubic
     return None
+
+
+def folded_weights(fx, dfx, fy, dfy, fold):  # pragma: no cover - replaced by the overload in numba
+    """``(w, wx, wy)``: the ``n1 x n1`` values and gradients of :class:`FoldedTables`' slots, as tuples."""
+    raise NotImplementedError("only callable from compiled code")
+
+
+def _folded_source(n1: int) -> str:
+    """Source of :func:`folded_weights` for ``n1`` factors: every slot written out."""
+    c = n1 // 2
+    lines = ["def folded(fx, dfx, fy, dfy, fold):",
+             f"    q = fx[{c}] * fy[{c}]", f"    qx = dfx[{c}] * fy[{c}]", f"    qy = fx[{c}] * dfy[{c}]"]
+    slots = [(i, j) for i in range(n1) for j in range(n1)]
+    for name, a, b, centre in (("w", "fx", "fy", "q"), ("wx", "dfx", "fy", "qx"), ("wy", "fx", "dfy", "qy")):
+        terms = ", ".join(f"{a}[{i}] * {b}[{j}] + fold[{i * n1 + j}] * {centre}" for i, j in slots)
+        lines.append(f"    {name} = ({terms})")
+    lines.append("    return w, wx, wy")
+    return "\n".join(lines)
+
+
+@overload(folded_weights, inline="always")
+def _folded_weights(fx, dfx, fy, dfy, fold):
+    namespace: dict = {}
+    exec(_folded_source(fx.count), namespace)  # noqa: S102 - generated from integers only
+    return namespace["folded"]
 
 
 @numba.njit(cache=True, inline="always")

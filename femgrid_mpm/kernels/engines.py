@@ -90,9 +90,16 @@ class CompiledTransfer:
         grid = simulation.grid
         self.grid = grid
         self.basis = separated_tables(grid)
-        # tensor-product bases take the unrolled, sum-factorized kernels
-        family = "tensor" if self.basis.tensor is not None else "flat"
-        self._arrays = self.basis.tensor.arrays() if family == "tensor" else self.basis.arrays()
+        # tensor-product bases take the unrolled, sum-factorized kernels; serendipity (tensor
+        # products plus a share of the centre one) the folded ones; the flat ones serve any basis
+        if self.basis.tensor is not None:
+            family, tables = "tensor", self.basis.tensor
+        elif self.basis.folded is not None:
+            family, tables = "folded", self.basis.folded
+        else:
+            family, tables = "flat", self.basis
+        self.family = family
+        self._arrays = tables.arrays()
         self._p2g, self._stress_and_force, self._velocity_gradient, self._internal_force, self._g2p = (
             getattr(kernels, f"{family}_{name}")
             for name in ("p2g", "linear_elastic_stress_and_force", "velocity_gradient", "internal_force", "g2p")
@@ -108,7 +115,7 @@ class CompiledTransfer:
         # N.T @ V_p: consistent mass (weak nodes) and the lumped mass threshold
         self.want_volume = bool(getattr(simulation.mass, "needs_volume", False))
         self.grid_volume = np.zeros(n_nodes if self.want_volume else 1)
-        # a mass model with its own transfer weights (HRZ) is assembled from the matrices
+        # a mass model that needs N itself is assembled from the matrices
         self.from_matrices = bool(getattr(simulation.mass, "needs_matrices", False))
         self._no_acceleration = np.zeros((n_nodes, 2))
         self.divergence = np.zeros(n)
@@ -119,7 +126,7 @@ class CompiledTransfer:
         self.pattern = None
         self._no_pattern = (np.zeros(2, np.int32), np.zeros((1, 1), np.int32), np.zeros((1, 1), np.int32), np.zeros(1))
         if hasattr(simulation.mass, "assemble_pattern"):
-            connectivity = self.basis.tensor.connectivity if family == "tensor" else self.basis.connectivity
+            connectivity = tables.connectivity
             self.pattern = mass_pattern(grid, connectivity)
             self.want_volume = True
             self.grid_volume = np.zeros(n_nodes)

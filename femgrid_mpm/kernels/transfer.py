@@ -38,7 +38,7 @@ import math
 import numba
 import numpy as np
 
-from .basis import evaluate_point, normalized_squares, scratch, tensor_constants, tensor_weights
+from .basis import evaluate_point, folded_weights, normalized_squares, scratch, tensor_constants, tensor_weights
 
 OUTSIDE = -1
 
@@ -521,5 +521,196 @@ def tensor_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, h
             ay += gx[i] * say
             ux += fx[i] * sux
             uy += fx[i] * suy
+        total += _move_point(p, dt, ax, ay, ux, uy, v_ref, v, x, density_p, divergence)
+    return total
+
+
+# -- folded bases (serendipity): n1 x n1 tensor slots in registers, the centre folded in ---------------------
+#
+# ``folded_weights`` returns every slot's value and gradient as tuples
+# (see :class:`~femgrid_mpm.kernels.basis.FoldedTables`); the loops over the
+# slots have a compile-time length and are unrolled, and the centre slot,
+# which is no node, is skipped.  Same arithmetic per function as the flat
+# kernels (``q_own + c q_centre``), so the weights agree bit for bit.
+
+
+@numba.njit(cache=True)
+def folded_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
+               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, fold, connectivity,
+               grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, slots, matrix):
+    """:func:`flat_p2g` for folded bases (``slots`` in slot order)."""
+    n1 = len(marker)
+    n_slots = n1 * n1
+    centre = n_slots // 2
+    grid_mass[:] = 0.0
+    momentum[:] = 0.0
+    if signed or hrz:
+        grid_absolute[:] = 0.0
+    if want_volume:
+        grid_volume[:] = 0.0
+    if assemble:
+        matrix[:] = 0.0
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
+    for p in range(x.shape[0]):
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
+        if element < 0:
+            return p
+        w, wx, wy = folded_weights(fx, dfx, fy, dfy, fold)
+        m = mass_p[p]
+        px = m * (v[p, 0] - v_ref[0])
+        py = m * (v[p, 1] - v_ref[1])
+        volume = m / density_p[p]
+        squares = 0.0
+        if hrz:
+            for s in range(n_slots):
+                squares += w[s] * w[s]  # the centre's weight is exactly zero
+        for s in range(n_slots):
+            if s == centre:
+                continue
+            node = connectivity[element, s]
+            grid_mass[node] += w[s] * m
+            if hrz:  # W = N^2 / sum N^2 carries the momentum; its column sums are the diagonal mass
+                weight = w[s] * w[s] / squares
+                grid_absolute[node] += weight * m
+                momentum[node, 0] += weight * px
+                momentum[node, 1] += weight * py
+            else:
+                momentum[node, 0] += w[s] * px
+                momentum[node, 1] += w[s] * py
+                if signed:
+                    grid_absolute[node] += abs(w[s]) * m
+            if want_volume:
+                grid_volume[node] += w[s] * volume
+            if assemble:
+                weighted = w[s] * m
+                start = indptr[node]
+                for b in range(n_slots):
+                    if b != centre:
+                        matrix[start + rank[node, slots[s, b]]] += weighted * w[b]
+    return -1
+
+
+@numba.njit(cache=True, inline="always")
+def _folded_gradient(element, wx, wy, n_slots, centre, connectivity, relative):
+    """``dNdx @ v_rel`` and ``dNdy @ v_rel`` of one point: (dvx/dx, dvy/dx, dvx/dy, dvy/dy)."""
+    dvx_dx = 0.0
+    dvy_dx = 0.0
+    dvx_dy = 0.0
+    dvy_dy = 0.0
+    for s in range(n_slots):
+        if s == centre:
+            continue
+        node = connectivity[element, s]
+        rx = relative[node, 0]
+        ry = relative[node, 1]
+        dvx_dx += wx[s] * rx
+        dvy_dx += wx[s] * ry
+        dvx_dy += wy[s] * rx
+        dvy_dy += wy[s] * ry
+    return dvx_dx, dvy_dx, dvx_dy, dvy_dy
+
+
+@numba.njit(cache=True, inline="always")
+def _folded_force(element, wx, wy, n_slots, centre, connectivity, w_xx, w_yy, w_xy, force):
+    """One point's share of Eq. 11, ``-V sigma grad N``, scattered to its nodes."""
+    for s in range(n_slots):
+        if s == centre:
+            continue
+        node = connectivity[element, s]
+        force[node, 0] -= wx[s] * w_xx + wy[s] * w_xy
+        force[node, 1] -= wx[s] * w_xy + wy[s] * w_yy
+
+
+@numba.njit(cache=True)
+def folded_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
+                                           marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                                           uniform, fold, connectivity, strain, stress, force, divergence):
+    """:func:`flat_linear_elastic_stress_and_force` for folded bases."""
+    _relative_velocity(velocity, v_ref, relative)
+    n1 = len(marker)
+    n_slots = n1 * n1
+    centre = n_slots // 2
+    force[:] = 0.0
+    total = 0.0
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
+    for p in range(x.shape[0]):
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
+        w, wx, wy = folded_weights(fx, dfx, fy, dfy, fold)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy = _folded_gradient(element, wx, wy, n_slots, centre, connectivity, relative)
+        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, divergence)
+        total += s_xx + s_yy + s_xy
+        volume = mass_p[p] / density_p[p]
+        _folded_force(element, wx, wy, n_slots, centre, connectivity, volume * s_xx, volume * s_yy, volume * s_xy,
+                      force)
+    return total
+
+
+@numba.njit(cache=True)
+def folded_velocity_gradient(x, velocity, v_ref, relative, dt,
+                             marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, fold,
+                             connectivity, strain, strain_increment, gradient_increment, divergence):
+    """:func:`flat_velocity_gradient` for folded bases."""
+    _relative_velocity(velocity, v_ref, relative)
+    n1 = len(marker)
+    n_slots = n1 * n1
+    centre = n_slots // 2
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
+    for p in range(x.shape[0]):
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
+        w, wx, wy = folded_weights(fx, dfx, fy, dfy, fold)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy = _folded_gradient(element, wx, wy, n_slots, centre, connectivity, relative)
+        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, divergence)
+
+
+@numba.njit(cache=True)
+def folded_internal_force(x, mass_p, density_p, stress,
+                          marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, fold,
+                          connectivity, force):
+    """:func:`flat_internal_force` for folded bases."""
+    n1 = len(marker)
+    n_slots = n1 * n1
+    centre = n_slots // 2
+    force[:] = 0.0
+    total = 0.0
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
+    for p in range(x.shape[0]):
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
+        w, wx, wy = folded_weights(fx, dfx, fy, dfy, fold)
+        volume = mass_p[p] / density_p[p]
+        total += stress[p, 0] + stress[p, 1] + stress[p, 2]
+        _folded_force(element, wx, wy, n_slots, centre, connectivity, volume * stress[p, 0], volume * stress[p, 1],
+                      volume * stress[p, 2], force)
+    return total
+
+
+@numba.njit(cache=True)
+def folded_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, hrz,
+               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, fold, connectivity):
+    """:func:`flat_g2p` for folded bases."""
+    n1 = len(marker)
+    n_slots = n1 * n1
+    centre = n_slots // 2
+    total = 0.0
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
+    for p in range(x.shape[0]):
+        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
+        w, wx, wy = folded_weights(fx, dfx, fy, dfy, fold)
+        squares = 0.0
+        if hrz:
+            for s in range(n_slots):
+                squares += w[s] * w[s]
+        ax = 0.0
+        ay = 0.0
+        ux = 0.0
+        uy = 0.0
+        for s in range(n_slots):
+            if s == centre:
+                continue
+            node = connectivity[element, s]
+            weight = w[s] * w[s] / squares if hrz else w[s]  # what carries the velocity increment
+            ax += weight * acceleration[node, 0]
+            ay += weight * acceleration[node, 1]
+            ux += w[s] * relative[node, 0]
+            uy += w[s] * relative[node, 1]
         total += _move_point(p, dt, ax, ay, ux, uy, v_ref, v, x, density_p, divergence)
     return total
