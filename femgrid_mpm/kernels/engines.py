@@ -124,7 +124,8 @@ class CompiledTransfer:
         self._stress_total = 0.0
         # consistent mass: assembled in the P2G pass into a pattern fixed per grid
         self.pattern = None
-        self._no_pattern = (np.zeros(2, np.int32), np.zeros((1, 1), np.int32), np.zeros((1, 1), np.int32), np.zeros(1))
+        self._no_pattern = (np.zeros(2, np.int32), np.zeros((1, 1), np.int32), np.zeros(1, dtype=bool),
+                            np.zeros((1, 1), np.int32), np.zeros(1))
         if hasattr(simulation.mass, "assemble_pattern"):
             connectivity = tables.connectivity
             self.pattern = mass_pattern(grid, connectivity)
@@ -166,7 +167,8 @@ class CompiledTransfer:
             outside = self._p2g(
                 p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, self.want_volume, pattern is not None,
                 self.hrz, *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum,
-                *(self._no_pattern if pattern is None else (pattern.indptr, pattern.rank, pattern.slots, pattern.data)),
+                *(self._no_pattern if pattern is None else (pattern.indptr, pattern.rank, pattern.complete, pattern.slots,
+                                                    pattern.data)),
             )
         if outside >= 0:
             self.grid.locate(p.x)  # raises the ValueError naming the points outside

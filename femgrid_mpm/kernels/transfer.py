@@ -78,7 +78,7 @@ def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, str
 @numba.njit(cache=True)
 def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
         marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights, connectivity,
-        grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, slots, matrix):
+        grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, matrix):
     """Scatter mass, relative momentum (and the mass matrix, into the fixed
     pattern of :mod:`.pattern`) to the grid.
 
@@ -128,8 +128,10 @@ def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
             if assemble:
                 weighted = w[k] * m
                 start = indptr[node]
+                full = complete[node]
                 for j in range(n_local):
-                    matrix[start + rank[node, slots[k, j]]] += weighted * w[j]
+                    slot = slots[k, j]
+                    matrix[start + (slot if full else rank[node, slot])] += weighted * w[j]
     return -1
 
 
@@ -321,7 +323,7 @@ def lumped_grid_velocity(grid_mass, grid_absolute, signed, reference_mass, momen
 @numba.njit(cache=True)
 def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
-               grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, slots, matrix):
+               grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, matrix):
     """:func:`flat_p2g` for tensor-product bases (``slots`` in tensor order)."""
     n1 = len(marker)
     grid_mass[:] = 0.0
@@ -388,11 +390,13 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                     a = i * n1 + j
                     node = connectivity[element, a]
                     start = indptr[node]
+                    full = complete[node]
                     m_a = fx[i] * fy[j] * m
                     for k in range(n1):
                         m_ak = m_a * fx[k]
                         for l in range(n1):
-                            matrix[start + rank[node, slots[a, k * n1 + l]]] += m_ak * fy[l]
+                            slot = slots[a, k * n1 + l]
+                            matrix[start + (slot if full else rank[node, slot])] += m_ak * fy[l]
     return -1
 
 
@@ -537,7 +541,7 @@ def tensor_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, h
 @numba.njit(cache=True)
 def folded_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, fold, connectivity,
-               grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, slots, matrix):
+               grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, matrix):
     """:func:`flat_p2g` for folded bases (``slots`` in slot order)."""
     n1 = len(marker)
     n_slots = n1 * n1
@@ -584,9 +588,11 @@ def folded_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
             if assemble:
                 weighted = w[s] * m
                 start = indptr[node]
+                full = complete[node]
                 for b in range(n_slots):
                     if b != centre:
-                        matrix[start + rank[node, slots[s, b]]] += weighted * w[b]
+                        slot = slots[s, b]
+                        matrix[start + (slot if full else rank[node, slot])] += weighted * w[b]
     return -1
 
 
