@@ -93,7 +93,9 @@ class SolverSpec(_Model):
     ``consistent_fallback``: ``"error"`` or ``"blend"`` when the consistent
     mass matrix is singular (see :mod:`femgrid_mpm.mass`), with ``blend``
     the lumped weight; ``weak_fraction`` the volume fraction under which a
-    node is lumped; ``cg_tolerance`` CG's relative residual; ``engine``
+    node is lumped; ``linear_solver`` how the consistent system is solved
+    (``"auto"``: SuperLU up to 5000 active nodes, CG beyond);
+    ``cg_tolerance`` CG's relative residual; ``engine``
     the implementation of the step's transfers (:mod:`femgrid_mpm.kernels`).
     """
 
@@ -104,6 +106,7 @@ class SolverSpec(_Model):
     consistent_fallback: Literal["error", "blend"] = "error"
     blend: Annotated[float, Field(gt=0, le=1)] = 0.1
     weak_fraction: Annotated[float, Field(ge=0, lt=1)] = 0.01
+    linear_solver: Literal["auto", "direct", "cg"] = "auto"
     cg_tolerance: Annotated[float, Field(gt=0, lt=1)] = 1e-6
     #: the step's transfers: compiled kernels, or scipy.sparse (the reference)
     engine: Literal["numba", "scipy"] = "numba"

@@ -167,6 +167,7 @@ class Simulation:
             nonnegative=self.grid.nonnegative,
             weak_fraction=solver.weak_fraction,
             tolerance=solver.cg_tolerance,
+            linear_solver=solver.linear_solver,
             fallback=solver.consistent_fallback,
             blend=solver.blend,
             preconditioner=tensor_preconditioner(self.grid),
