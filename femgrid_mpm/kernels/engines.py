@@ -118,7 +118,8 @@ class CompiledTransfer:
         # a mass model that needs N itself is assembled from the matrices
         self.from_matrices = bool(getattr(simulation.mass, "needs_matrices", False))
         self._no_acceleration = np.zeros((n_nodes, 2))
-        self.divergence = np.zeros(n)
+        # per point, from the force pass to G2P: div v and N @ v_rel of the step's start
+        self.start_motion = np.zeros((n, 3))
         self._relative = np.zeros((n_nodes, 2))
         self._strain_increment = self._gradient_increment = None
         self._stress_total = 0.0
@@ -190,20 +191,20 @@ class CompiledTransfer:
         if self._lame is not None and self.threads > 1:
             self._stress_total = parallel.parallel_stress_and_force(
                 p.x, ctx.velocity, ctx.frame_velocity, self._relative, dt, p.mass, p.density, p.body, self._lame,
-                *self._arrays, p.strain, p.stress, force, self.divergence, self._force_parts, self._relative_parts,
+                *self._arrays, p.strain, p.stress, force, self.start_motion, self._force_parts, self._relative_parts,
             )
             return force
         if self._lame is not None:
             self._stress_total = self._stress_and_force(
                 p.x, ctx.velocity, ctx.frame_velocity, self._relative, dt, p.mass, p.density, p.body, self._lame,
-                *self._arrays, p.strain, p.stress, force, self.divergence,
+                *self._arrays, p.strain, p.stress, force, self.start_motion,
             )
             return force
         if self._strain_increment is None:
             self._strain_increment = np.empty((p.n, 3))
             self._gradient_increment = np.empty((p.n, 4))
         self._velocity_gradient(p.x, ctx.velocity, ctx.frame_velocity, self._relative, dt, *self._arrays, p.strain,
-                                  self._strain_increment, self._gradient_increment, self.divergence)
+                                  self._strain_increment, self._gradient_increment, self.start_motion)
         for material, members in zip(materials, body_slices):
             material.update(p, members, self._strain_increment, self._gradient_increment)
         self._stress_total = self._internal_force(p.x, p.mass, p.density, p.stress, *self._arrays, force)
@@ -215,11 +216,11 @@ class CompiledTransfer:
         acceleration = self._no_acceleration if self.from_matrices else ctx.acceleration
         increment = dt * (ctx.transfer_weights @ ctx.acceleration) if self.from_matrices else None
         if self.threads > 1 and not self.hrz:
-            total = parallel.parallel_g2p(p.x, p.v, p.density, acceleration, self._relative, ctx.frame_velocity,
-                                          dt, self.divergence, *self._arrays, self.threads)
+            total = parallel.parallel_g2p(p.x, p.v, p.density, acceleration, ctx.frame_velocity,
+                                          dt, self.start_motion, *self._arrays, self.threads)
         else:
-            total = self._g2p(p.x, p.v, p.density, acceleration, self._relative, ctx.frame_velocity, dt,
-                              self.divergence, self.hrz, *self._arrays)
+            total = self._g2p(p.x, p.v, p.density, acceleration, ctx.frame_velocity, dt,
+                              self.start_motion, self.hrz, *self._arrays)
         self.matrices.invalidate()  # the points moved
         if increment is not None:
             p.v += increment

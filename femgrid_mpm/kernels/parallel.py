@@ -68,7 +68,7 @@ def parallel_p2g(x, v, mass_p, density_p, v_ref, signed,
 @numba.njit(cache=True, parallel=True)
 def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
-                              strain, stress, force, divergence, force_parts, relative_parts):
+                              strain, stress, force, start_motion, force_parts, relative_parts):
     """:func:`tensor_linear_elastic_stress_and_force` over chunks of points."""
     n_chunks = force_parts.shape[0]
     n = x.shape[0]
@@ -78,7 +78,7 @@ def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_
         totals[chunk] = tensor_linear_elastic_stress_and_force(
             x[start:stop], velocity, v_ref, relative_parts[chunk], dt, mass_p[start:stop], density_p[start:stop],
             body[start:stop], lame, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
-            connectivity, strain[start:stop], stress[start:stop], force_parts[chunk], divergence[start:stop])
+            connectivity, strain[start:stop], stress[start:stop], force_parts[chunk], start_motion[start:stop])
     _sum_parts(force_parts, force)
     relative[:] = relative_parts[0]
     total = 0.0
@@ -88,15 +88,15 @@ def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_
 
 
 @numba.njit(cache=True, parallel=True)
-def parallel_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence,
+def parallel_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion,
                  marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity, n_chunks):
     """:func:`tensor_g2p` over chunks of points (no scatter: nothing to combine but the checksum)."""
     n = x.shape[0]
     totals = np.zeros(n_chunks)
     for chunk in prange(n_chunks):
         start, stop = _bounds(chunk, n_chunks, n)
-        totals[chunk] = tensor_g2p(x[start:stop], v[start:stop], density_p[start:stop], acceleration, relative, v_ref,
-                                   dt, divergence[start:stop], False, marker, geometry, n_elements, factors_x, table_x,
+        totals[chunk] = tensor_g2p(x[start:stop], v[start:stop], density_p[start:stop], acceleration, v_ref,
+                                   dt, start_motion[start:stop], False, marker, geometry, n_elements, factors_x, table_x,
                                    factors_y, table_y, uniform, connectivity)
     total = 0.0
     for chunk in range(n_chunks):

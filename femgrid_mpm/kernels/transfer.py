@@ -18,7 +18,10 @@ matters), so the two engines agree to rounding.
     the linear elastic stress update (Eq. 6) in one pass.
 ``g2p``
     ``v_p += dt N @ a``, ``x_p += dt (N @ v_rel + v_ref)``, ``rho_p *= exp(-dt div v)``
-    (Eqs. 19-21).
+    (Eqs. 19-21).  ``N @ v_rel`` and ``div v`` (of the grid velocity at the
+    step's start) are interpolated in the force pass, whose gathers of
+    ``v_rel`` already hold the inner sums, and handed over per point in
+    ``start_motion`` (n, 3): G2P gathers the acceleration only.
 
 With ``hrz`` (``mass = "hrz"``, :class:`femgrid_mpm.mass.HrzMass`) the
 point's HRZ weights ``W = N^2 / sum N^2`` carry the momentum in P2G and the
@@ -52,7 +55,7 @@ def _relative_velocity(velocity, v_ref, relative):
 
 
 @numba.njit(cache=True, inline="always")
-def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, divergence):
+def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, start_motion):
     """Paper Eqs. 18 and 6 for point ``p``: strain increment from its velocity
     gradient, the incremental linear elastic stress, ``div v`` for Eq. 21.
     Returns the new stress (xx, yy, xy)."""
@@ -71,7 +74,7 @@ def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, str
     stress[p, 0] = s_xx
     stress[p, 1] = s_yy
     stress[p, 2] = s_xy
-    divergence[p] = dvx_dx + dvy_dy
+    start_motion[p, 0] = dvx_dx + dvy_dy
     return s_xx, s_yy, s_xy
 
 
@@ -136,7 +139,7 @@ def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
 
 
 @numba.njit(cache=True, inline="always")
-def _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, divergence):
+def _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, start_motion):
     """Eq. 18 for any material: point p's strain increment (added to its strain),
     ``dt L`` and ``div v``."""
     strain_increment[p, 0] = dt * dvx_dx
@@ -148,28 +151,32 @@ def _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_incre
     gradient_increment[p, 1] = dt * dvx_dy
     gradient_increment[p, 2] = dt * dvy_dx
     gradient_increment[p, 3] = dt * dvy_dy
-    divergence[p] = dvx_dx + dvy_dy
+    start_motion[p, 0] = dvx_dx + dvy_dy
 
 
 @numba.njit(cache=True, inline="always")
-def _move_point(p, dt, ax, ay, ux, uy, v_ref, v, x, density_p, divergence):
-    """Eqs. 19-21 for point p from its interpolated acceleration (ax, ay) and
-    relative grid velocity (ux, uy).  Returns ``v_x + v_y + x + y``."""
+def _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion):
+    """Eqs. 19-21 for point p from its interpolated acceleration (ax, ay) and what
+    the force pass interpolated (``start_motion[p]``: ``div v`` and the relative
+    grid velocity ``N @ v_rel``).  Returns ``v_x + v_y + x + y``."""
     v[p, 0] += dt * ax
     v[p, 1] += dt * ay
-    x[p, 0] += dt * (ux + v_ref[0])
-    x[p, 1] += dt * (uy + v_ref[1])
-    density_p[p] *= math.exp(-dt * divergence[p])
+    x[p, 0] += dt * (start_motion[p, 1] + v_ref[0])
+    x[p, 1] += dt * (start_motion[p, 2] + v_ref[1])
+    density_p[p] *= math.exp(-dt * start_motion[p, 0])
     return v[p, 0] + v[p, 1] + x[p, 0] + x[p, 1]
 
 
 @numba.njit(cache=True, inline="always")
-def _flat_gradient(element, n_local, connectivity, relative, wx, wy):
-    """``dNdx @ v_rel`` and ``dNdy @ v_rel`` at one point: (d vx/dx, d vy/dx, d vx/dy, d vy/dy)."""
+def _flat_gradient(element, n_local, connectivity, relative, w, wx, wy):
+    """``dNdx @ v_rel``, ``dNdy @ v_rel`` and ``N @ v_rel`` at one point:
+    (d vx/dx, d vy/dx, d vx/dy, d vy/dy, vx, vy)."""
     dvx_dx = 0.0
     dvy_dx = 0.0
     dvx_dy = 0.0
     dvy_dy = 0.0
+    ux = 0.0
+    uy = 0.0
     for k in range(n_local):
         node = connectivity[element, k]
         rx = relative[node, 0]
@@ -178,7 +185,9 @@ def _flat_gradient(element, n_local, connectivity, relative, wx, wy):
         dvy_dx += wx[k] * ry
         dvx_dy += wy[k] * rx
         dvy_dy += wy[k] * ry
-    return dvx_dx, dvy_dx, dvx_dy, dvy_dy
+        ux += w[k] * rx
+        uy += w[k] * ry
+    return dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy
 
 
 @numba.njit(cache=True, inline="always")
@@ -193,7 +202,7 @@ def _flat_force(element, n_local, connectivity, wx, wy, w_xx, w_yy, w_xy, force)
 @numba.njit(cache=True)
 def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                                     marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
-                                    terms, term_weights, connectivity, strain, stress, force, divergence):
+                                    terms, term_weights, connectivity, strain, stress, force, start_motion):
     """Eqs. 18, 6 and 11 in one pass, for bodies of :class:`LinearElastic` material.
 
     ``lame[b] = (lambda, 2 mu)`` of body b.  Returns the sum of the new
@@ -208,8 +217,10 @@ def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_
     for p in range(x.shape[0]):
         element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy = _flat_gradient(element, n_local, connectivity, relative, wx, wy)
-        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, divergence)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _flat_gradient(element, n_local, connectivity, relative, w, wx, wy)
+        start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
+        start_motion[p, 2] = uy
+        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, start_motion)
         total += s_xx + s_yy + s_xy
         volume = mass_p[p] / density_p[p]
         w_xx = volume * s_xx
@@ -222,7 +233,7 @@ def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_
 @numba.njit(cache=True)
 def flat_velocity_gradient(x, velocity, v_ref, relative, dt,
                       marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights,
-                      connectivity, strain, strain_increment, gradient_increment, divergence):
+                      connectivity, strain, strain_increment, gradient_increment, start_motion):
     """Eq. 18 for any material: the strain increment (added to ``strain``) and ``dt L``."""
     _relative_velocity(velocity, v_ref, relative)
     n_local = connectivity.shape[1]
@@ -231,8 +242,10 @@ def flat_velocity_gradient(x, velocity, v_ref, relative, dt,
     for p in range(x.shape[0]):
         element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy = _flat_gradient(element, n_local, connectivity, relative, wx, wy)
-        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, divergence)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _flat_gradient(element, n_local, connectivity, relative, w, wx, wy)
+        start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
+        start_motion[p, 2] = uy
+        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, start_motion)
 
 
 @numba.njit(cache=True)
@@ -258,10 +271,11 @@ def flat_internal_force(x, mass_p, density_p, stress,
 
 
 @numba.njit(cache=True)
-def flat_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, hrz,
+def flat_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
         marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights, connectivity):
     """Eqs. 19-21: point velocity from the grid acceleration, position from the
-    grid velocity of the step's start, density.  Returns ``sum(v) + sum(x)``."""
+    grid velocity of the step's start and density from its divergence (both
+    interpolated in the force pass: ``start_motion``).  Returns ``sum(v) + sum(x)``."""
     n_local = connectivity.shape[1]
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     total = 0.0
@@ -271,8 +285,6 @@ def flat_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, hrz
                                  terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         ax = 0.0
         ay = 0.0
-        ux = 0.0
-        uy = 0.0
         squares = 0.0
         if hrz:
             for k in range(n_local):
@@ -282,9 +294,7 @@ def flat_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, hrz
             weight = w[k] * w[k] / squares if hrz else w[k]  # what carries the velocity increment
             ax += weight * acceleration[node, 0]
             ay += weight * acceleration[node, 1]
-            ux += w[k] * relative[node, 0]
-            uy += w[k] * relative[node, 1]
-        total += _move_point(p, dt, ax, ay, ux, uy, v_ref, v, x, density_p, divergence)
+        total += _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion)
     return total
 
 
@@ -402,11 +412,14 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
 
 @numba.njit(cache=True, inline="always")
 def _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative):
-    """``dNdx @ v_rel`` and ``dNdy @ v_rel`` of one point: (dvx/dx, dvy/dx, dvx/dy, dvy/dy)."""
+    """``dNdx @ v_rel``, ``dNdy @ v_rel`` and ``N @ v_rel`` of one point:
+    (dvx/dx, dvy/dx, dvx/dy, dvy/dy, vx, vy); the last two reuse the inner sums."""
     dvx_dx = 0.0
     dvy_dx = 0.0
     dvx_dy = 0.0
     dvy_dy = 0.0
+    ux = 0.0
+    uy = 0.0
     for i in range(n1):
         ax = 0.0
         ay = 0.0
@@ -424,7 +437,9 @@ def _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative):
         dvy_dx += dfx[i] * ay
         dvx_dy += fx[i] * bx
         dvy_dy += fx[i] * by
-    return dvx_dx, dvy_dx, dvx_dy, dvy_dy
+        ux += fx[i] * ax
+        uy += fx[i] * ay
+    return dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy
 
 
 @numba.njit(cache=True, inline="always")
@@ -444,7 +459,7 @@ def _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, w_xx, w_yy, w_xy,
 @numba.njit(cache=True)
 def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                                            marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
-                                           connectivity, strain, stress, force, divergence):
+                                           connectivity, strain, stress, force, start_motion):
     """:func:`flat_linear_elastic_stress_and_force` for tensor-product bases."""
     _relative_velocity(velocity, v_ref, relative)
     n1 = len(marker)
@@ -453,8 +468,10 @@ def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mas
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
         element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
-        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, divergence)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
+        start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
+        start_motion[p, 2] = uy
+        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, start_motion)
         total += s_xx + s_yy + s_xy
         volume = mass_p[p] / density_p[p]
         _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, volume * s_xx, volume * s_yy, volume * s_xy,
@@ -465,15 +482,17 @@ def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mas
 @numba.njit(cache=True)
 def tensor_velocity_gradient(x, velocity, v_ref, relative, dt,
                              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
-                             strain, strain_increment, gradient_increment, divergence):
+                             strain, strain_increment, gradient_increment, start_motion):
     """:func:`flat_velocity_gradient` for tensor-product bases."""
     _relative_velocity(velocity, v_ref, relative)
     n1 = len(marker)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
         element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
-        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, divergence)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
+        start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
+        start_motion[p, 2] = uy
+        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, start_motion)
 
 
 @numba.njit(cache=True)
@@ -495,7 +514,7 @@ def tensor_internal_force(x, mass_p, density_p, stress,
 
 
 @numba.njit(cache=True)
-def tensor_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, hrz,
+def tensor_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity):
     """:func:`flat_g2p` for tensor-product bases."""
     n1 = len(marker)
@@ -505,27 +524,19 @@ def tensor_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, h
         element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         ax = 0.0
         ay = 0.0
-        ux = 0.0
-        uy = 0.0
         # what carries the velocity increment: N, or the HRZ weights
         gx = normalized_squares(fx) if hrz else fx
         gy = normalized_squares(fy) if hrz else fy
         for i in range(n1):
             sax = 0.0
             say = 0.0
-            sux = 0.0
-            suy = 0.0
             for j in range(n1):
                 node = connectivity[element, i * n1 + j]
                 sax += gy[j] * acceleration[node, 0]
                 say += gy[j] * acceleration[node, 1]
-                sux += fy[j] * relative[node, 0]
-                suy += fy[j] * relative[node, 1]
             ax += gx[i] * sax
             ay += gx[i] * say
-            ux += fx[i] * sux
-            uy += fx[i] * suy
-        total += _move_point(p, dt, ax, ay, ux, uy, v_ref, v, x, density_p, divergence)
+        total += _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion)
     return total
 
 
@@ -597,12 +608,15 @@ def folded_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
 
 
 @numba.njit(cache=True, inline="always")
-def _folded_gradient(element, wx, wy, n_slots, centre, connectivity, relative):
-    """``dNdx @ v_rel`` and ``dNdy @ v_rel`` of one point: (dvx/dx, dvy/dx, dvx/dy, dvy/dy)."""
+def _folded_gradient(element, w, wx, wy, n_slots, centre, connectivity, relative):
+    """``dNdx @ v_rel``, ``dNdy @ v_rel`` and ``N @ v_rel`` of one point:
+    (dvx/dx, dvy/dx, dvx/dy, dvy/dy, vx, vy)."""
     dvx_dx = 0.0
     dvy_dx = 0.0
     dvx_dy = 0.0
     dvy_dy = 0.0
+    ux = 0.0
+    uy = 0.0
     for s in range(n_slots):
         if s == centre:
             continue
@@ -613,7 +627,9 @@ def _folded_gradient(element, wx, wy, n_slots, centre, connectivity, relative):
         dvy_dx += wx[s] * ry
         dvx_dy += wy[s] * rx
         dvy_dy += wy[s] * ry
-    return dvx_dx, dvy_dx, dvx_dy, dvy_dy
+        ux += w[s] * rx
+        uy += w[s] * ry
+    return dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy
 
 
 @numba.njit(cache=True, inline="always")
@@ -630,7 +646,7 @@ def _folded_force(element, wx, wy, n_slots, centre, connectivity, w_xx, w_yy, w_
 @numba.njit(cache=True)
 def folded_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                                            marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
-                                           uniform, fold, connectivity, strain, stress, force, divergence):
+                                           uniform, fold, connectivity, strain, stress, force, start_motion):
     """:func:`flat_linear_elastic_stress_and_force` for folded bases."""
     _relative_velocity(velocity, v_ref, relative)
     n1 = len(marker)
@@ -642,8 +658,10 @@ def folded_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mas
     for p in range(x.shape[0]):
         element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         w, wx, wy = folded_weights(fx, dfx, fy, dfy, fold)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy = _folded_gradient(element, wx, wy, n_slots, centre, connectivity, relative)
-        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, divergence)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _folded_gradient(element, w, wx, wy, n_slots, centre, connectivity, relative)
+        start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
+        start_motion[p, 2] = uy
+        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, start_motion)
         total += s_xx + s_yy + s_xy
         volume = mass_p[p] / density_p[p]
         _folded_force(element, wx, wy, n_slots, centre, connectivity, volume * s_xx, volume * s_yy, volume * s_xy,
@@ -654,7 +672,7 @@ def folded_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mas
 @numba.njit(cache=True)
 def folded_velocity_gradient(x, velocity, v_ref, relative, dt,
                              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, fold,
-                             connectivity, strain, strain_increment, gradient_increment, divergence):
+                             connectivity, strain, strain_increment, gradient_increment, start_motion):
     """:func:`flat_velocity_gradient` for folded bases."""
     _relative_velocity(velocity, v_ref, relative)
     n1 = len(marker)
@@ -664,8 +682,10 @@ def folded_velocity_gradient(x, velocity, v_ref, relative, dt,
     for p in range(x.shape[0]):
         element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         w, wx, wy = folded_weights(fx, dfx, fy, dfy, fold)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy = _folded_gradient(element, wx, wy, n_slots, centre, connectivity, relative)
-        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, divergence)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _folded_gradient(element, w, wx, wy, n_slots, centre, connectivity, relative)
+        start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
+        start_motion[p, 2] = uy
+        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, start_motion)
 
 
 @numba.njit(cache=True)
@@ -690,7 +710,7 @@ def folded_internal_force(x, mass_p, density_p, stress,
 
 
 @numba.njit(cache=True)
-def folded_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, hrz,
+def folded_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, fold, connectivity):
     """:func:`flat_g2p` for folded bases."""
     n1 = len(marker)
@@ -707,8 +727,6 @@ def folded_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, h
                 squares += w[s] * w[s]
         ax = 0.0
         ay = 0.0
-        ux = 0.0
-        uy = 0.0
         for s in range(n_slots):
             if s == centre:
                 continue
@@ -716,7 +734,5 @@ def folded_g2p(x, v, density_p, acceleration, relative, v_ref, dt, divergence, h
             weight = w[s] * w[s] / squares if hrz else w[s]  # what carries the velocity increment
             ax += weight * acceleration[node, 0]
             ay += weight * acceleration[node, 1]
-            ux += w[s] * relative[node, 0]
-            uy += w[s] * relative[node, 1]
-        total += _move_point(p, dt, ax, ay, ux, uy, v_ref, v, x, density_p, divergence)
+        total += _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion)
     return total
