@@ -99,6 +99,8 @@ class Simulation:
         if fixed and isinstance(self.mass, ConsistentMass):
             self.mass.fixed = np.logical_or.reduce(fixed)
         self.dt = self._time_step()
+        if hasattr(self.mass, "time_step"):
+            self.mass.time_step = self.dt
         self.n_steps = int(np.ceil(scene.time.end / self.dt - 1e-9))
         for effect in watching:  # observers last: they may read dt and n_steps
             self.effects[effect.stage].append((effect.name, effect.bind(self)))

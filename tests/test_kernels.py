@@ -215,3 +215,33 @@ def test_flat_kernels_serve_a_basis_with_no_special_form(monkeypatch, mass):
     folded.advance()
     flat.advance()
     np.testing.assert_array_equal(flat.transfer.grid_mass, folded.transfer.grid_mass)
+
+
+def test_the_velocity_guess_advances_the_last_grid_velocity():
+    """CG's first guess of the consistent velocity solve is the last grid velocity
+    plus dt times its acceleration, in the new frame (exact for points that keep
+    their places): on the q1 block it saves iterations against extrapolating the
+    last two solutions (measured 4 against 6 per solve here; 2 against ~11 at 1e5
+    points), and both reach the same state within CG's tolerance."""
+    runs = {}
+    for advanced in (True, False):
+        simulation = Simulation(block_scene("q1", "consistent", "numba"))
+        simulation.mass.linear_solver = "cg"
+        if not advanced:
+            simulation.mass.time_step = None  # falls back to extrapolation
+        counts = []
+        solve = simulation.mass.solve
+
+        def counted(rhs, kind="velocity", simulation=simulation, counts=counts, solve=solve):
+            before = simulation.mass.iterations
+            solution = solve(rhs, kind)
+            if kind == "velocity":
+                counts.append(simulation.mass.iterations - before)
+            return solution
+
+        simulation.mass.solve = counted
+        for _ in range(8):
+            simulation.advance()
+        runs[advanced] = (counts, simulation.particles.v.copy())
+    assert all(a < b for a, b in zip(runs[True][0][2:], runs[False][0][2:]))
+    np.testing.assert_allclose(runs[True][1], runs[False][1], rtol=0, atol=1e-6 * np.abs(runs[False][1]).max())
