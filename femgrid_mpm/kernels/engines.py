@@ -212,7 +212,8 @@ class CompiledTransfer:
 
     def to_points(self, ctx: StepContext, dt: float) -> float:
         p = ctx.particles
-        # own transfer weights: the kernel moves the points (N) with no acceleration, W carries it after
+        # a model assembled from the matrices: the kernel moves the points (N) with no acceleration,
+        # its transfer weights carry the acceleration after
         acceleration = self._no_acceleration if self.from_matrices else ctx.acceleration
         increment = dt * (ctx.transfer_weights @ ctx.acceleration) if self.from_matrices else None
         if self.threads > 1 and not self.hrz:
