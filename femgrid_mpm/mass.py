@@ -657,15 +657,7 @@ def _row_times_dense(indptr, indices, data, x, i):
 @numba.njit(cache=True)
 def _csr_times_dense(indptr, indices, data, x, out):
     """``out = A @ x`` for x of shape (n, 1) or (n, 2)."""
-    if x.shape[1] == 2:
-        for i in range(len(indptr) - 1):
-            out[i, 0], out[i, 1] = _row_times_dense(indptr, indices, data, x, i)
-    else:
-        for i in range(len(indptr) - 1):
-            first = 0.0
-            for entry in range(indptr[i], indptr[i + 1]):
-                first += data[entry] * x[indices[entry], 0]
-            out[i, 0] = first
+    _csr_times_dense_dot(indptr, indices, data, x, out, np.zeros(x.shape[1]))
     return out
 
 

@@ -75,24 +75,21 @@ class BasisTables:
     def arrays(self) -> tuple:
         """The arrays of the flat (any basis) kernels, in the order they take them."""
         return (self.marker, self.geometry, self.n_elements, self.factors_x, self.table_x, self.factors_y,
-                self.table_y, self.uniform, self.terms, self.term_weights, self.connectivity)
+                self.table_y, self.uniform, (self.terms, self.term_weights), self.connectivity)
 
 
 @dataclass(frozen=True)
-class TensorTables:
-    """A tensor-product basis, ``phi_(i n1 + j) = U_i(xi) W_j(eta)``, for the fast kernels.
+class _Factors:
+    """The 1D factors of the fast kernels' bases (:class:`TensorTables`, :class:`FoldedTables`).
 
     ``marker`` is a tuple of ``n1`` zeros: its length is a compile-time
     constant for numba, so each kind of basis gets kernels with fully
-    unrolled loops over its ``n1 x n1`` nodes and sum factorization.
-    ``order[s]`` is the grid's local index of tensor slot ``s``;
-    ``connectivity`` is the grid's, permuted to tensor order.
-    ``uniform = (first_x, last_x, first_y, last_y)``: the cell columns
-    ``first_x..last_x`` (rows ``first_y..last_y``) all use the table of
-    ``first_x`` (``first_y``), which the kernels load once into registers
-    (every cell for Lagrange bases and ghost-node splines, the interior for
-    open-knot splines); a per-point table lookup made the transfers ~1.7x
-    slower.
+    unrolled loops over its ``n1 x n1`` slots.  ``uniform = (first_x,
+    last_x, first_y, last_y)``: the cell columns ``first_x..last_x`` (rows
+    ``first_y..last_y``) all use the table of ``first_x`` (``first_y``),
+    which the kernels load once into registers (every cell for Lagrange
+    bases and ghost-node splines, the interior for open-knot splines); a
+    per-point table lookup made the transfers ~1.7x slower.
     """
 
     marker: tuple
@@ -102,17 +99,29 @@ class TensorTables:
     table_x: np.ndarray
     factors_y: np.ndarray
     table_y: np.ndarray
-    connectivity: np.ndarray
-    order: np.ndarray
     uniform: np.ndarray
 
     def arrays(self) -> tuple:
+        """The kernels' arguments, in their order."""
         return (self.marker, self.geometry, self.n_elements, self.factors_x, self.table_x, self.factors_y,
-                self.table_y, self.uniform, self.connectivity)
+                self.table_y, self.uniform, *self._extra(), self.connectivity)
+
+    def _extra(self) -> tuple:
+        return ()
 
 
 @dataclass(frozen=True)
-class FoldedTables:
+class TensorTables(_Factors):
+    """A tensor-product basis, ``phi_(i n1 + j) = U_i(xi) W_j(eta)``, for the fast kernels
+    (sum factorization).  ``order[s]`` is the grid's local index of tensor
+    slot ``s``; ``connectivity`` is the grid's, permuted to tensor order."""
+
+    connectivity: np.ndarray = None
+    order: np.ndarray = None
+
+
+@dataclass(frozen=True)
+class FoldedTables(_Factors):
     """Tensor-product functions plus a share of the centre one (serendipity), for the folded kernels.
 
     Local function k is ``q_(s_k) + fold[s_k] q_c`` with
@@ -127,21 +136,12 @@ class FoldedTables:
     local index of slot s (-1 for the centre).
     """
 
-    marker: tuple
-    geometry: np.ndarray
-    n_elements: np.ndarray
-    factors_x: np.ndarray
-    table_x: np.ndarray
-    factors_y: np.ndarray
-    table_y: np.ndarray
-    uniform: np.ndarray
-    fold: tuple
-    connectivity: np.ndarray
-    order: np.ndarray
+    fold: tuple = ()
+    connectivity: np.ndarray = None
+    order: np.ndarray = None
 
-    def arrays(self) -> tuple:
-        return (self.marker, self.geometry, self.n_elements, self.factors_x, self.table_x, self.factors_y,
-                self.table_y, self.uniform, self.fold, self.connectivity)
+    def _extra(self) -> tuple:
+        return (self.fold,)
 
 
 def _folded_form(factors_x, factors_y, terms, weights, connectivity):
@@ -198,15 +198,15 @@ def separated_tables(grid) -> BasisTables:
     if tensor is not None:
         fx, fy, order = tensor
         uniform = np.array([*_uniform_run(fx, table_x), *_uniform_run(fy, table_y)], dtype=np.int64)
-        tensor = TensorTables((0,) * fx.shape[1], geometry, n_elements, fx, table_x, fy, table_y,
-                              np.ascontiguousarray(connectivity[:, order]), order, uniform)
+        tensor = TensorTables((0,) * fx.shape[1], geometry, n_elements, fx, table_x, fy, table_y, uniform,
+                              connectivity=np.ascontiguousarray(connectivity[:, order]), order=order)
     factors_x, factors_y, terms, weights = flat
     uniform = np.array([*_uniform_run(factors_x, table_x), *_uniform_run(factors_y, table_y)], dtype=np.int64)
     folded = None if tensor is not None else _folded_form(factors_x, factors_y, terms, weights, connectivity)
     if folded is not None:
         fold, folded_connectivity, order = folded
         folded = FoldedTables((0,) * factors_x.shape[1], geometry, n_elements, factors_x, table_x, factors_y,
-                              table_y, uniform, fold, folded_connectivity, order)
+                              table_y, uniform, fold=fold, connectivity=folded_connectivity, order=order)
     return BasisTables((0,) * factors_x.shape[1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
                        terms, weights, connectivity, uniform, tensor, folded)
 
@@ -359,13 +359,14 @@ def scratch(factors_x, factors_y, n_local):
 
 
 @numba.njit(cache=True)
-def shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms,
-                        term_weights, connectivity, values, d_x, d_y, nodes):
+def shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
+                        connectivity, values, d_x, d_y, nodes):
     """``N, dNdx, dNdy`` of every point as fixed-width rows (n, n_local), and their nodes.
 
     Returns the first point outside the grid, or -1.
     """
     n_local = connectivity.shape[1]
+    terms, term_weights = form
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
@@ -503,6 +504,70 @@ def _folded_weights(fx, dfx, fy, dfy, fold):
     namespace: dict = {}
     exec(_folded_source(fx.count), namespace)  # noqa: S102 - generated from integers only
     return namespace["folded"]
+
+
+def point_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y, form, work):  # pragma: no cover
+    """``(element, w, wx, wy)``: a point's element (-1 outside) and the values and
+    gradients of its local functions, for ``form`` = ``(terms, term_weights)``
+    (:class:`BasisTables`: into the scratch arrays ``work``) or a fold
+    (:class:`FoldedTables`: register tuples in slot order)."""
+    raise NotImplementedError("only callable from compiled code")
+
+
+@overload(point_weights, inline="always")
+def _point_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y, form, work):
+    if isinstance(form, numba.types.UniTuple) and isinstance(form.dtype, numba.types.Float):
+        def folded(px, py, constants, marker, factors_x, table_x, factors_y, table_y, form, work):
+            element, fx, dfx, fy, dfy = tensor_weights(px, py, constants, marker, factors_x, table_x, factors_y,
+                                                       table_y)
+            w, wx, wy = folded_weights(fx, dfx, fy, dfy, form)
+            return element, w, wx, wy
+        return folded
+
+    def flat(px, py, constants, marker, factors_x, table_x, factors_y, table_y, form, work):
+        q, qx, qy, unused, w, wx, wy = work
+        element = evaluate_point(px, py, constants, marker, factors_x, table_x, factors_y, table_y, form[0], form[1],
+                                 q, qx, qy, unused, w, wx, wy)
+        return element, w, wx, wy
+    return flat
+
+
+def point_work(form, factors_x, factors_y, n_local):  # pragma: no cover - replaced by the overload in numba
+    """The scratch arrays :func:`point_weights` needs for ``form`` (none for a fold)."""
+    raise NotImplementedError("only callable from compiled code")
+
+
+@overload(point_work, inline="always")
+def _point_work(form, factors_x, factors_y, n_local):
+    if isinstance(form, numba.types.UniTuple) and isinstance(form.dtype, numba.types.Float):
+        def folded(form, factors_x, factors_y, n_local):
+            return ()
+        return folded
+
+    def flat(form, factors_x, factors_y, n_local):
+        return scratch(factors_x, factors_y, n_local)
+    return flat
+
+
+def function_slots(form, marker, connectivity):  # pragma: no cover - replaced by the overload in numba
+    """``(count, skip)``: how many local slots :func:`point_weights` gives and
+    which one is no function (the folded centre; -1 for none)."""
+    raise NotImplementedError("only callable from compiled code")
+
+
+@overload(function_slots, inline="always")
+def _function_slots(form, marker, connectivity):
+    if isinstance(form, numba.types.UniTuple) and isinstance(form.dtype, numba.types.Float):
+        count = len(marker.types) ** 2  # compile-time constants: the loops over slots unroll
+        skip = count // 2
+
+        def folded(form, marker, connectivity):
+            return count, skip
+        return folded
+
+    def flat(form, marker, connectivity):
+        return connectivity.shape[1], -1
+    return flat
 
 
 @numba.njit(cache=True, inline="always")

@@ -100,8 +100,9 @@ class CompiledTransfer:
             family, tables = "flat", self.basis
         self.family = family
         self._arrays = tables.arrays()
+        kind = "tensor" if family == "tensor" else "local"  # the flat and folded forms share kernels
         self._p2g, self._stress_and_force, self._velocity_gradient, self._internal_force, self._g2p = (
-            getattr(kernels, f"{family}_{name}")
+            getattr(kernels, f"{kind}_{name}")
             for name in ("p2g", "linear_elastic_stress_and_force", "velocity_gradient", "internal_force", "g2p")
         )
         self.signed = not grid.nonnegative

@@ -41,7 +41,7 @@ import math
 import numba
 import numpy as np
 
-from .basis import evaluate_point, folded_weights, normalized_squares, scratch, tensor_constants, tensor_weights
+from .basis import function_slots, normalized_squares, point_weights, point_work, tensor_constants, tensor_weights
 
 OUTSIDE = -1
 
@@ -78,64 +78,17 @@ def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, str
     return s_xx, s_yy, s_xy
 
 
-@numba.njit(cache=True)
-def flat_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
-        marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights, connectivity,
-        grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, matrix):
-    """Scatter mass, relative momentum (and the mass matrix, into the fixed
-    pattern of :mod:`.pattern`) to the grid.
-
-    Returns the first point outside the grid, or -1.
-    """
-    n_local = connectivity.shape[1]
-    fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
+@numba.njit(cache=True, inline="always")
+def _clear_sums(absolute, want_volume, assemble, grid_mass, momentum, grid_absolute, grid_volume, matrix):
+    """Zero what a P2G pass sums into: mass, momentum and what it is asked for."""
     grid_mass[:] = 0.0
     momentum[:] = 0.0
-    if signed or hrz:
+    if absolute:
         grid_absolute[:] = 0.0
     if want_volume:
         grid_volume[:] = 0.0
     if assemble:
         matrix[:] = 0.0
-    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
-    for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
-                                 terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
-        if element < 0:
-            return p
-        m = mass_p[p]
-        px = m * (v[p, 0] - v_ref[0])
-        py = m * (v[p, 1] - v_ref[1])
-        volume = m / density_p[p]
-        if hrz:  # W = N^2 / sum N^2 carries the momentum; its column sums are the diagonal mass
-            squares = 0.0
-            for k in range(n_local):
-                squares += w[k] * w[k]
-            for k in range(n_local):
-                node = connectivity[element, k]
-                weight = w[k] * w[k] / squares
-                grid_mass[node] += w[k] * m
-                grid_absolute[node] += weight * m
-                momentum[node, 0] += weight * px
-                momentum[node, 1] += weight * py
-            continue
-        for k in range(n_local):
-            node = connectivity[element, k]
-            grid_mass[node] += w[k] * m
-            momentum[node, 0] += w[k] * px
-            momentum[node, 1] += w[k] * py
-            if signed:
-                grid_absolute[node] += abs(w[k]) * m
-            if want_volume:
-                grid_volume[node] += w[k] * volume
-            if assemble:
-                weighted = w[k] * m
-                start = indptr[node]
-                full = complete[node]
-                for j in range(n_local):
-                    slot = slots[k, j]
-                    matrix[start + (slot if full else rank[node, slot])] += weighted * w[j]
-    return -1
 
 
 @numba.njit(cache=True, inline="always")
@@ -167,8 +120,17 @@ def _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion):
     return v[p, 0] + v[p, 1] + x[p, 0] + x[p, 1]
 
 
+# -- any basis, function by function: the flat (tables) and folded (serendipity) forms -----------------
+#
+# ``point_weights`` gives a point's element and the values and gradients of
+# its local functions (scratch arrays for the flat form, register tuples for
+# the folded one); ``function_slots`` their count and the slot that is no
+# function (the folded form's centre; -1 for none).  Each kernel is compiled
+# once per form.
+
+
 @numba.njit(cache=True, inline="always")
-def _flat_gradient(element, n_local, connectivity, relative, w, wx, wy):
+def _local_gradient(element, count, skip, connectivity, relative, w, wx, wy):
     """``dNdx @ v_rel``, ``dNdy @ v_rel`` and ``N @ v_rel`` at one point:
     (d vx/dx, d vy/dx, d vx/dy, d vy/dy, vx, vy)."""
     dvx_dx = 0.0
@@ -177,7 +139,9 @@ def _flat_gradient(element, n_local, connectivity, relative, w, wx, wy):
     dvy_dy = 0.0
     ux = 0.0
     uy = 0.0
-    for k in range(n_local):
+    for k in range(count):
+        if k == skip:
+            continue
         node = connectivity[element, k]
         rx = relative[node, 0]
         ry = relative[node, 1]
@@ -191,135 +155,184 @@ def _flat_gradient(element, n_local, connectivity, relative, w, wx, wy):
 
 
 @numba.njit(cache=True, inline="always")
-def _flat_force(element, n_local, connectivity, wx, wy, w_xx, w_yy, w_xy, force):
+def _local_force(element, count, skip, connectivity, wx, wy, w_xx, w_yy, w_xy, force):
     """One point's share of Eq. 11, ``-V sigma grad N``, scattered to its nodes."""
-    for k in range(n_local):
+    for k in range(count):
+        if k == skip:
+            continue
         node = connectivity[element, k]
         force[node, 0] -= wx[k] * w_xx + wy[k] * w_xy
         force[node, 1] -= wx[k] * w_xy + wy[k] * w_yy
 
 
 @numba.njit(cache=True)
-def flat_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
-                                    marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
-                                    terms, term_weights, connectivity, strain, stress, force, start_motion):
+def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
+              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity,
+              grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, matrix):
+    """Scatter mass, relative momentum (and the mass matrix, into the fixed
+    pattern of :mod:`.pattern`) to the grid.
+
+    Returns the first point outside the grid, or -1.
+    """
+    count, skip = function_slots(form, marker, connectivity)
+    work = point_work(form, factors_x, factors_y, connectivity.shape[1])
+    _clear_sums(signed or hrz, want_volume, assemble, grid_mass, momentum, grid_absolute, grid_volume, matrix)
+    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
+    for p in range(x.shape[0]):
+        element, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                           table_y, form, work)
+        if element < 0:
+            return p
+        m = mass_p[p]
+        px = m * (v[p, 0] - v_ref[0])
+        py = m * (v[p, 1] - v_ref[1])
+        # one loop per kind of sum (the branches outside the unrolled loops)
+        if hrz:  # W = N^2 / sum N^2 carries the momentum; its column sums are the diagonal mass
+            squares = 0.0
+            for k in range(count):
+                squares += w[k] * w[k]  # a skipped slot's weight is exactly zero
+            for k in range(count):
+                if k != skip:
+                    node = connectivity[element, k]
+                    weight = w[k] * w[k] / squares
+                    grid_mass[node] += w[k] * m
+                    grid_absolute[node] += weight * m
+                    momentum[node, 0] += weight * px
+                    momentum[node, 1] += weight * py
+        elif signed:  # also |N|.T @ m_p
+            for k in range(count):
+                if k != skip:
+                    node = connectivity[element, k]
+                    grid_mass[node] += w[k] * m
+                    grid_absolute[node] += abs(w[k]) * m
+                    momentum[node, 0] += w[k] * px
+                    momentum[node, 1] += w[k] * py
+        else:
+            for k in range(count):
+                if k != skip:
+                    node = connectivity[element, k]
+                    grid_mass[node] += w[k] * m
+                    momentum[node, 0] += w[k] * px
+                    momentum[node, 1] += w[k] * py
+        if want_volume:
+            volume = m / density_p[p]
+            for k in range(count):
+                if k != skip:
+                    grid_volume[connectivity[element, k]] += w[k] * volume
+        if assemble:
+            for k in range(count):
+                if k != skip:
+                    node = connectivity[element, k]
+                    weighted = w[k] * m
+                    start = indptr[node]
+                    full = complete[node]
+                    for j in range(count):
+                        if j != skip:
+                            slot = slots[k, j]
+                            matrix[start + (slot if full else rank[node, slot])] += weighted * w[j]
+    return -1
+
+
+@numba.njit(cache=True)
+def local_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
+                                          marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                                          uniform, form, connectivity, strain, stress, force, start_motion):
     """Eqs. 18, 6 and 11 in one pass, for bodies of :class:`LinearElastic` material.
 
     ``lame[b] = (lambda, 2 mu)`` of body b.  Returns the sum of the new
     stresses (for the finiteness check).
     """
     _relative_velocity(velocity, v_ref, relative)
-    n_local = connectivity.shape[1]
-    fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
+    count, skip = function_slots(form, marker, connectivity)
+    work = point_work(form, factors_x, factors_y, connectivity.shape[1])
     force[:] = 0.0
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
-                                 terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _flat_gradient(element, n_local, connectivity, relative, w, wx, wy)
+        element, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                           table_y, form, work)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _local_gradient(element, count, skip, connectivity, relative, w, wx, wy)
         start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
         start_motion[p, 2] = uy
-        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, start_motion)
+        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress,
+                                                 start_motion)
         total += s_xx + s_yy + s_xy
         volume = mass_p[p] / density_p[p]
-        w_xx = volume * s_xx
-        w_yy = volume * s_yy
-        w_xy = volume * s_xy
-        _flat_force(element, n_local, connectivity, wx, wy, w_xx, w_yy, w_xy, force)
+        _local_force(element, count, skip, connectivity, wx, wy, volume * s_xx, volume * s_yy, volume * s_xy, force)
     return total
 
 
 @numba.njit(cache=True)
-def flat_velocity_gradient(x, velocity, v_ref, relative, dt,
-                      marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights,
-                      connectivity, strain, strain_increment, gradient_increment, start_motion):
+def local_velocity_gradient(x, velocity, v_ref, relative, dt,
+                            marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
+                            connectivity, strain, strain_increment, gradient_increment, start_motion):
     """Eq. 18 for any material: the strain increment (added to ``strain``) and ``dt L``."""
     _relative_velocity(velocity, v_ref, relative)
-    n_local = connectivity.shape[1]
-    fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
+    count, skip = function_slots(form, marker, connectivity)
+    work = point_work(form, factors_x, factors_y, connectivity.shape[1])
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
-                                 terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _flat_gradient(element, n_local, connectivity, relative, w, wx, wy)
+        element, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                           table_y, form, work)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _local_gradient(element, count, skip, connectivity, relative, w, wx, wy)
         start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
         start_motion[p, 2] = uy
         _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, start_motion)
 
 
 @numba.njit(cache=True)
-def flat_internal_force(x, mass_p, density_p, stress,
-                   marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights,
-                   connectivity, force):
+def local_internal_force(x, mass_p, density_p, stress,
+                         marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
+                         connectivity, force):
     """Eq. 11: ``f_I = -sum_p V_p sigma_p grad N_I`` with the volumes of time t."""
-    n_local = connectivity.shape[1]
-    fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
+    count, skip = function_slots(form, marker, connectivity)
+    work = point_work(form, factors_x, factors_y, connectivity.shape[1])
     force[:] = 0.0
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
-                                 terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
+        element, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                           table_y, form, work)
         volume = mass_p[p] / density_p[p]
-        w_xx = volume * stress[p, 0]
-        w_yy = volume * stress[p, 1]
-        w_xy = volume * stress[p, 2]
         total += stress[p, 0] + stress[p, 1] + stress[p, 2]
-        _flat_force(element, n_local, connectivity, wx, wy, w_xx, w_yy, w_xy, force)
+        _local_force(element, count, skip, connectivity, wx, wy, volume * stress[p, 0], volume * stress[p, 1],
+                     volume * stress[p, 2], force)
     return total
 
 
 @numba.njit(cache=True)
-def flat_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
-        marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, terms, term_weights, connectivity):
+def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
+              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity):
     """Eqs. 19-21: point velocity from the grid acceleration, position from the
     grid velocity of the step's start and density from its divergence (both
     interpolated in the force pass: ``start_motion``).  Returns ``sum(v) + sum(x)``."""
-    n_local = connectivity.shape[1]
-    fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
+    count, skip = function_slots(form, marker, connectivity)
+    work = point_work(form, factors_x, factors_y, connectivity.shape[1])
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
-                                 terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
+        element, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                           table_y, form, work)
         ax = 0.0
         ay = 0.0
-        squares = 0.0
-        if hrz:
-            for k in range(n_local):
+        if hrz:  # the HRZ weights carry the velocity increment
+            squares = 0.0
+            for k in range(count):
                 squares += w[k] * w[k]
-        for k in range(n_local):
-            node = connectivity[element, k]
-            weight = w[k] * w[k] / squares if hrz else w[k]  # what carries the velocity increment
-            ax += weight * acceleration[node, 0]
-            ay += weight * acceleration[node, 1]
+            for k in range(count):
+                if k != skip:
+                    node = connectivity[element, k]
+                    weight = w[k] * w[k] / squares
+                    ax += weight * acceleration[node, 0]
+                    ay += weight * acceleration[node, 1]
+        else:
+            for k in range(count):
+                if k != skip:
+                    node = connectivity[element, k]
+                    ax += w[k] * acceleration[node, 0]
+                    ay += w[k] * acceleration[node, 1]
         total += _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion)
     return total
-
-
-@numba.njit(cache=True)
-def lumped_grid_velocity(grid_mass, grid_absolute, signed, reference_mass, momentum, v_ref,
-                         inverse, active, velocity, full_momentum):
-    """Lumped grid update (Eqs. 15-17): which nodes can be divided by, ``1 / m_I``,
-    ``v_I = p_rel / m_I + v_ref`` and the momentum in the fixed frame.
-
-    A node is active when its mass is not empty and (signed bases) not
-    cancellation-dominated: ``|m_I| > 1e-6 sum m_p |N_Ip|``.  Returns the
-    smallest mass.
-    """
-    smallest = np.inf
-    for i in range(grid_mass.shape[0]):
-        m = grid_mass[i]
-        absolute = grid_absolute[i] if signed else m
-        smallest = min(smallest, m)
-        is_active = abs(m) > 1e-6 * absolute and absolute > 1e-12 * reference_mass
-        active[i] = is_active
-        inverse[i] = 1.0 / m if is_active else 0.0
-        for c in range(2):
-            velocity[i, c] = momentum[i, c] * inverse[i] + v_ref[c]
-            full_momentum[i, c] = momentum[i, c] + m * v_ref[c]
-    return smallest
 
 
 # -- tensor-product bases: sum factorization over the n1 x n1 nodes ----------------------------------------
@@ -336,14 +349,7 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, matrix):
     """:func:`flat_p2g` for tensor-product bases (``slots`` in tensor order)."""
     n1 = len(marker)
-    grid_mass[:] = 0.0
-    momentum[:] = 0.0
-    if signed or hrz:
-        grid_absolute[:] = 0.0
-    if want_volume:
-        grid_volume[:] = 0.0
-    if assemble:
-        matrix[:] = 0.0
+    _clear_sums(signed or hrz, want_volume, assemble, grid_mass, momentum, grid_absolute, grid_volume, matrix)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
         element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
@@ -352,7 +358,6 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
         m = mass_p[p]
         px = m * (v[p, 0] - v_ref[0])
         py = m * (v[p, 1] - v_ref[1])
-        volume = m / density_p[p]
         if hrz:  # W_ij = gx_i gy_j carries the momentum; its column sums are the diagonal mass
             gx = normalized_squares(fx)
             gy = normalized_squares(fy)
@@ -390,6 +395,7 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                     momentum[node, 0] += px_i * fy[j]
                     momentum[node, 1] += py_i * fy[j]
         if want_volume:
+            volume = m / density_p[p]
             for i in range(n1):
                 v_i = fx[i] * volume
                 for j in range(n1):
@@ -536,203 +542,5 @@ def tensor_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
                 say += gy[j] * acceleration[node, 1]
             ax += gx[i] * sax
             ay += gx[i] * say
-        total += _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion)
-    return total
-
-
-# -- folded bases (serendipity): n1 x n1 tensor slots in registers, the centre folded in ---------------------
-#
-# ``folded_weights`` returns every slot's value and gradient as tuples
-# (see :class:`~femgrid_mpm.kernels.basis.FoldedTables`); the loops over the
-# slots have a compile-time length and are unrolled, and the centre slot,
-# which is no node, is skipped.  Same arithmetic per function as the flat
-# kernels (``q_own + c q_centre``), so the weights agree bit for bit.
-
-
-@numba.njit(cache=True)
-def folded_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
-               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, fold, connectivity,
-               grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, matrix):
-    """:func:`flat_p2g` for folded bases (``slots`` in slot order)."""
-    n1 = len(marker)
-    n_slots = n1 * n1
-    centre = n_slots // 2
-    grid_mass[:] = 0.0
-    momentum[:] = 0.0
-    if signed or hrz:
-        grid_absolute[:] = 0.0
-    if want_volume:
-        grid_volume[:] = 0.0
-    if assemble:
-        matrix[:] = 0.0
-    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
-    for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
-        if element < 0:
-            return p
-        w, wx, wy = folded_weights(fx, dfx, fy, dfy, fold)
-        m = mass_p[p]
-        px = m * (v[p, 0] - v_ref[0])
-        py = m * (v[p, 1] - v_ref[1])
-        volume = m / density_p[p]
-        squares = 0.0
-        if hrz:
-            for s in range(n_slots):
-                squares += w[s] * w[s]  # the centre's weight is exactly zero
-        for s in range(n_slots):
-            if s == centre:
-                continue
-            node = connectivity[element, s]
-            grid_mass[node] += w[s] * m
-            if hrz:  # W = N^2 / sum N^2 carries the momentum; its column sums are the diagonal mass
-                weight = w[s] * w[s] / squares
-                grid_absolute[node] += weight * m
-                momentum[node, 0] += weight * px
-                momentum[node, 1] += weight * py
-            else:
-                momentum[node, 0] += w[s] * px
-                momentum[node, 1] += w[s] * py
-                if signed:
-                    grid_absolute[node] += abs(w[s]) * m
-            if want_volume:
-                grid_volume[node] += w[s] * volume
-            if assemble:
-                weighted = w[s] * m
-                start = indptr[node]
-                full = complete[node]
-                for b in range(n_slots):
-                    if b != centre:
-                        slot = slots[s, b]
-                        matrix[start + (slot if full else rank[node, slot])] += weighted * w[b]
-    return -1
-
-
-@numba.njit(cache=True, inline="always")
-def _folded_gradient(element, w, wx, wy, n_slots, centre, connectivity, relative):
-    """``dNdx @ v_rel``, ``dNdy @ v_rel`` and ``N @ v_rel`` of one point:
-    (dvx/dx, dvy/dx, dvx/dy, dvy/dy, vx, vy)."""
-    dvx_dx = 0.0
-    dvy_dx = 0.0
-    dvx_dy = 0.0
-    dvy_dy = 0.0
-    ux = 0.0
-    uy = 0.0
-    for s in range(n_slots):
-        if s == centre:
-            continue
-        node = connectivity[element, s]
-        rx = relative[node, 0]
-        ry = relative[node, 1]
-        dvx_dx += wx[s] * rx
-        dvy_dx += wx[s] * ry
-        dvx_dy += wy[s] * rx
-        dvy_dy += wy[s] * ry
-        ux += w[s] * rx
-        uy += w[s] * ry
-    return dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy
-
-
-@numba.njit(cache=True, inline="always")
-def _folded_force(element, wx, wy, n_slots, centre, connectivity, w_xx, w_yy, w_xy, force):
-    """One point's share of Eq. 11, ``-V sigma grad N``, scattered to its nodes."""
-    for s in range(n_slots):
-        if s == centre:
-            continue
-        node = connectivity[element, s]
-        force[node, 0] -= wx[s] * w_xx + wy[s] * w_xy
-        force[node, 1] -= wx[s] * w_xy + wy[s] * w_yy
-
-
-@numba.njit(cache=True)
-def folded_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
-                                           marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
-                                           uniform, fold, connectivity, strain, stress, force, start_motion):
-    """:func:`flat_linear_elastic_stress_and_force` for folded bases."""
-    _relative_velocity(velocity, v_ref, relative)
-    n1 = len(marker)
-    n_slots = n1 * n1
-    centre = n_slots // 2
-    force[:] = 0.0
-    total = 0.0
-    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
-    for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
-        w, wx, wy = folded_weights(fx, dfx, fy, dfy, fold)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _folded_gradient(element, w, wx, wy, n_slots, centre, connectivity, relative)
-        start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
-        start_motion[p, 2] = uy
-        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, start_motion)
-        total += s_xx + s_yy + s_xy
-        volume = mass_p[p] / density_p[p]
-        _folded_force(element, wx, wy, n_slots, centre, connectivity, volume * s_xx, volume * s_yy, volume * s_xy,
-                      force)
-    return total
-
-
-@numba.njit(cache=True)
-def folded_velocity_gradient(x, velocity, v_ref, relative, dt,
-                             marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, fold,
-                             connectivity, strain, strain_increment, gradient_increment, start_motion):
-    """:func:`flat_velocity_gradient` for folded bases."""
-    _relative_velocity(velocity, v_ref, relative)
-    n1 = len(marker)
-    n_slots = n1 * n1
-    centre = n_slots // 2
-    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
-    for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
-        w, wx, wy = folded_weights(fx, dfx, fy, dfy, fold)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _folded_gradient(element, w, wx, wy, n_slots, centre, connectivity, relative)
-        start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
-        start_motion[p, 2] = uy
-        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, start_motion)
-
-
-@numba.njit(cache=True)
-def folded_internal_force(x, mass_p, density_p, stress,
-                          marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, fold,
-                          connectivity, force):
-    """:func:`flat_internal_force` for folded bases."""
-    n1 = len(marker)
-    n_slots = n1 * n1
-    centre = n_slots // 2
-    force[:] = 0.0
-    total = 0.0
-    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
-    for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
-        w, wx, wy = folded_weights(fx, dfx, fy, dfy, fold)
-        volume = mass_p[p] / density_p[p]
-        total += stress[p, 0] + stress[p, 1] + stress[p, 2]
-        _folded_force(element, wx, wy, n_slots, centre, connectivity, volume * stress[p, 0], volume * stress[p, 1],
-                      volume * stress[p, 2], force)
-    return total
-
-
-@numba.njit(cache=True)
-def folded_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
-               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, fold, connectivity):
-    """:func:`flat_g2p` for folded bases."""
-    n1 = len(marker)
-    n_slots = n1 * n1
-    centre = n_slots // 2
-    total = 0.0
-    constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
-    for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
-        w, wx, wy = folded_weights(fx, dfx, fy, dfy, fold)
-        squares = 0.0
-        if hrz:
-            for s in range(n_slots):
-                squares += w[s] * w[s]
-        ax = 0.0
-        ay = 0.0
-        for s in range(n_slots):
-            if s == centre:
-                continue
-            node = connectivity[element, s]
-            weight = w[s] * w[s] / squares if hrz else w[s]  # what carries the velocity increment
-            ax += weight * acceleration[node, 0]
-            ay += weight * acceleration[node, 1]
         total += _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion)
     return total
