@@ -191,10 +191,11 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
             squares = 0.0
             for k in range(count):
                 squares += w[k] * w[k]  # a skipped slot's weight is exactly zero
+            inverse = 1.0 / squares
             for k in range(count):
                 if k != skip:
                     node = connectivity[element, k]
-                    weight = w[k] * w[k] / squares
+                    weight = w[k] * w[k] * inverse
                     grid_mass[node] += w[k] * m
                     grid_absolute[node] += weight * m
                     momentum[node, 0] += weight * px
@@ -319,10 +320,11 @@ def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
             squares = 0.0
             for k in range(count):
                 squares += w[k] * w[k]
+            inverse = 1.0 / squares
             for k in range(count):
                 if k != skip:
                     node = connectivity[element, k]
-                    weight = w[k] * w[k] / squares
+                    weight = w[k] * w[k] * inverse
                     ax += weight * acceleration[node, 0]
                     ay += weight * acceleration[node, 1]
         else:
