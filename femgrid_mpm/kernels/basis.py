@@ -130,8 +130,8 @@ class FoldedTables(_Factors):
     are their Q2 functions minus a quarter of the centre bubble, the
     mid-side ones plus half of it.  The kernels evaluate the ``n1 x n1``
     products in registers and fold the centre in (no scratch arrays), so
-    serendipity runs at about q2's speed; consistent mass stays with the
-    flat kernels.  ``connectivity`` is in slot order (the centre slot holds a
+    serendipity runs at about q2's speed (the ``local_*`` kernels of
+    :mod:`.transfer`, shared with the flat form).  ``connectivity`` is in slot order (the centre slot holds a
     node of the element that is never touched), ``order[s]`` the grid's
     local index of slot s (-1 for the centre).
     """
