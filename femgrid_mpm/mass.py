@@ -328,6 +328,7 @@ class ConsistentMass:
 
     def __post_init__(self):
         self._previous: dict[str, tuple] = {}
+        self._frame = None  # the frame of the velocity being solved for (set by grid_velocity)
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
 
     def state(self) -> tuple[dict, dict]:
@@ -456,7 +457,8 @@ class ConsistentMass:
         guess = rhs / scale[:, None]
         history = [h[:, system.columns] for h in self._previous.get(kind, ())]
         accelerations = self._previous.get("acceleration", ())
-        if kind == "velocity" and history and accelerations and "frame" in self._previous and self.time_step:
+        if (kind == "velocity" and history and accelerations and "frame" in self._previous and self.time_step
+                and self._frame is not None):
             last, acceleration = history[-1], accelerations[-1][:, system.columns]
             shift = (self._previous["frame"][0][0] - self._frame)[system.columns]
             known = ((last != 0.0) | (acceleration != 0.0)).any(axis=1)
@@ -656,7 +658,7 @@ def _row_times_dense(indptr, indices, data, x, i):
 
 @numba.njit(cache=True)
 def _csr_times_dense(indptr, indices, data, x, out):
-    """``out = A @ x`` for x of shape (n, 1) or (n, 2)."""
+    """``out = A @ x`` for x of shape (n, k)."""
     _csr_times_dense_dot(indptr, indices, data, x, out, np.zeros(x.shape[1]))
     return out
 
@@ -683,13 +685,14 @@ def _csr_times_dense_dot(indptr, indices, data, x, out, dot):
             out[i, 1] = second
             dot[0] += x[i, 0] * first
             dot[1] += x[i, 1] * second
-    else:
+    else:  # any number of columns, one at a time
         for i in range(len(indptr) - 1):
-            first = 0.0
-            for entry in range(indptr[i], indptr[i + 1]):
-                first += data[entry] * x[indices[entry], 0]
-            out[i, 0] = first
-            dot[0] += x[i, 0] * first
+            for c in range(x.shape[1]):
+                total = 0.0
+                for entry in range(indptr[i], indptr[i + 1]):
+                    total += data[entry] * x[indices[entry], c]
+                out[i, c] = total
+                dot[c] += x[i, c] * total
 
 
 @numba.njit(cache=True)

@@ -51,9 +51,24 @@ def test_compiled_shape_functions_match_the_grid(basis):
 
 
 def test_tensor_kernels_cover_the_tensor_bases():
-    """q1, q2 and both cubic splines take the unrolled tensor kernels; serendipity the flat ones."""
-    tensor = {name for name in BASIS_NAMES if separated_tables(Grid(name, (0, 0), (2, 2), 0.5)).tensor is not None}
-    assert tensor == {"q1", "q2", "bspline3", "bspline3_open"}
+    """q1, q2 and both cubic splines take the unrolled tensor kernels; serendipity the folded ones."""
+    tables = {name: separated_tables(Grid(name, (0, 0), (2, 2), 0.5)) for name in BASIS_NAMES}
+    assert {name for name, t in tables.items() if t.tensor is not None} == {"q1", "q2", "bspline3", "bspline3_open"}
+    assert {name for name, t in tables.items() if t.folded is not None} == {"serendipity"}
+
+
+@pytest.mark.parametrize("columns", [1, 2, 3])
+def test_compiled_matrix_product_matches_scipy(columns):
+    """The CG's matrix product (four partial sums per row for two columns) against scipy."""
+    import scipy.sparse as sp
+
+    from femgrid_mpm.mass import _csr_times_dense
+
+    rng = np.random.default_rng(3)
+    matrix = sp.random(40, 40, density=0.3, random_state=4, format="csr")
+    x = rng.standard_normal((40, columns))
+    out = _csr_times_dense(matrix.indptr, matrix.indices, matrix.data, x, np.empty((40, columns)))
+    np.testing.assert_allclose(out, matrix @ x, rtol=0, atol=1e-14 * np.abs(matrix @ x).max())
 
 
 @pytest.mark.parametrize("basis", BASIS_NAMES)
@@ -245,3 +260,15 @@ def test_the_velocity_guess_advances_the_last_grid_velocity():
         runs[advanced] = (counts, simulation.particles.v.copy())
     assert all(a < b for a, b in zip(runs[True][0][2:], runs[False][0][2:]))
     np.testing.assert_allclose(runs[True][1], runs[False][1], rtol=0, atol=1e-6 * np.abs(runs[False][1]).max())
+
+
+def test_hrz_weights_follow_the_points():
+    """HRZ's weight matrix, built when gravity asks for it, is dropped when the points
+    move: read between steps it is the one of the points' new places."""
+    from femgrid_mpm.mass import positive_weights
+
+    simulation = Simulation(block_scene("q2", "hrz", "numba", loads=[{"kind": "gravity", "acceleration": [0.0, -9.81]}]))
+    simulation.advance()
+    simulation.advance()
+    expected = positive_weights(simulation.grid.shape_functions(simulation.particles.x)[0])
+    assert abs(simulation.context.transfer_weights - expected).max() < 1e-14

@@ -92,7 +92,10 @@ class StepContext:
         :class:`femgrid_mpm.mass.HrzMass`), so that a force on a point acts on the
         grid as the point's momentum does."""
         weights_for = getattr(self.mass, "weights_for", None)
-        return self.N if weights_for is None else weights_for(self.N)
+        if weights_for is not None:  # built from this step's N when first asked for
+            return weights_for(self.N)
+        weights = getattr(self.mass, "weights", None)
+        return self.N if weights is None else weights
 
     #: grid gradient of each body's mass, sum m_p grad N, (n_bodies, n_nodes, 2):
     #: contact normals (one field per body only)

@@ -224,6 +224,8 @@ class CompiledTransfer:
             total = self._g2p(p.x, p.v, p.density, acceleration, ctx.frame_velocity, dt,
                               self.start_motion, self.hrz, *self._arrays)
         self.matrices.invalidate()  # the points moved
+        if self.hrz:
+            ctx.mass.forget_weights()
         if increment is not None:
             p.v += increment
             total += float(increment.sum())

@@ -349,7 +349,7 @@ def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
 def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
                grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, matrix):
-    """:func:`flat_p2g` for tensor-product bases (``slots`` in tensor order)."""
+    """:func:`local_p2g` for tensor-product bases (``slots`` in tensor order)."""
     n1 = len(marker)
     _clear_sums(signed or hrz, want_volume, assemble, grid_mass, momentum, grid_absolute, grid_volume, matrix)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
@@ -468,7 +468,7 @@ def _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, w_xx, w_yy, w_xy,
 def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                                            marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
                                            connectivity, strain, stress, force, start_motion):
-    """:func:`flat_linear_elastic_stress_and_force` for tensor-product bases."""
+    """:func:`local_linear_elastic_stress_and_force` for tensor-product bases."""
     _relative_velocity(velocity, v_ref, relative)
     n1 = len(marker)
     force[:] = 0.0
@@ -491,7 +491,7 @@ def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mas
 def tensor_velocity_gradient(x, velocity, v_ref, relative, dt,
                              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
                              strain, strain_increment, gradient_increment, start_motion):
-    """:func:`flat_velocity_gradient` for tensor-product bases."""
+    """:func:`local_velocity_gradient` for tensor-product bases."""
     _relative_velocity(velocity, v_ref, relative)
     n1 = len(marker)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
@@ -507,7 +507,7 @@ def tensor_velocity_gradient(x, velocity, v_ref, relative, dt,
 def tensor_internal_force(x, mass_p, density_p, stress,
                           marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
                           force):
-    """:func:`flat_internal_force` for tensor-product bases."""
+    """:func:`local_internal_force` for tensor-product bases."""
     n1 = len(marker)
     force[:] = 0.0
     total = 0.0
@@ -524,7 +524,7 @@ def tensor_internal_force(x, mass_p, density_p, stress,
 @numba.njit(cache=True)
 def tensor_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity):
-    """:func:`flat_g2p` for tensor-product bases."""
+    """:func:`local_g2p` for tensor-product bases."""
     n1 = len(marker)
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
