@@ -29,14 +29,15 @@ from ..bases import LocalPolynomials, TensorSplines
 
 
 @dataclass(frozen=True)
-class BasisTables:
-    """A grid's basis in separated form, as plain arrays for the kernels.
+class _Factors:
+    """A basis as 1D factors on the lattice, the arrays every kernel takes.
 
     Attributes
     ----------
     marker : tuple
-        ``n1`` zeros, ``n1`` the number of 1D factors per direction (see
-        :class:`TensorTables`).
+        ``n1`` zeros, ``n1`` the number of 1D factors per direction: its
+        length is a compile-time constant for numba, so each kind of basis
+        gets kernels with fully unrolled loops over its ``n1 x n1`` slots.
     geometry : ndarray, shape (5,)
         ``lower_x, lower_y, upper_x, upper_y, 1 / element_width``.
     n_elements : ndarray of int64, shape (2,)
@@ -47,49 +48,13 @@ class BasisTables:
         (open-knot splines), else a single table.
     table_x, table_y : ndarray of int32, shape (n_elements_x,), (n_elements_y,)
         Which table each cell column (row) uses.
-    terms, term_weights : ndarray of int32 and of float, shape (n_local, width)
-        Local function k is ``sum_t term_weights[k, t] * q_(terms[k, t])``
-        with ``q_(i n1 + j) = U_i(xi) W_j(eta)``.
-    connectivity : ndarray of int32, shape (n_elements, n_local)
-        Global node of each local function, element ``ix * n_elements_y + iy``.
-    """
-
-    marker: tuple
-    geometry: np.ndarray
-    n_elements: np.ndarray
-    factors_x: np.ndarray
-    table_x: np.ndarray
-    factors_y: np.ndarray
-    table_y: np.ndarray
-    terms: np.ndarray
-    term_weights: np.ndarray
-    connectivity: np.ndarray
-    uniform: np.ndarray
-    tensor: "TensorTables | None" = None
-    folded: "FoldedTables | None" = None
-
-    @property
-    def n_local(self) -> int:
-        return self.connectivity.shape[1]
-
-    def arrays(self) -> tuple:
-        """The arrays of the flat (any basis) kernels, in the order they take them."""
-        return (self.marker, self.geometry, self.n_elements, self.factors_x, self.table_x, self.factors_y,
-                self.table_y, self.uniform, (self.terms, self.term_weights), self.connectivity)
-
-
-@dataclass(frozen=True)
-class _Factors:
-    """The 1D factors of the fast kernels' bases (:class:`TensorTables`, :class:`FoldedTables`).
-
-    ``marker`` is a tuple of ``n1`` zeros: its length is a compile-time
-    constant for numba, so each kind of basis gets kernels with fully
-    unrolled loops over its ``n1 x n1`` slots.  ``uniform = (first_x,
-    last_x, first_y, last_y)``: the cell columns ``first_x..last_x`` (rows
-    ``first_y..last_y``) all use the table of ``first_x`` (``first_y``),
-    which the kernels load once into registers (every cell for Lagrange
-    bases and ghost-node splines, the interior for open-knot splines); a
-    per-point table lookup made the transfers ~1.7x slower.
+    uniform : ndarray of int64, shape (4,)
+        ``(first_x, last_x, first_y, last_y)``: the cell columns
+        ``first_x..last_x`` (rows ``first_y..last_y``) all use the table of
+        ``first_x`` (``first_y``), which the kernels load once into registers
+        (every cell for Lagrange bases and ghost-node splines, the interior
+        for open-knot splines); a per-point table lookup made the transfers
+        ~1.7x slower.
     """
 
     marker: tuple
@@ -108,6 +73,37 @@ class _Factors:
 
     def _extra(self) -> tuple:
         return ()
+
+
+@dataclass(frozen=True)
+class BasisTables(_Factors):
+    """A grid's basis in separated form (any basis: the flat form), with its
+    faster forms where it has them.
+
+    Attributes
+    ----------
+    terms, term_weights : ndarray of int32 and of float, shape (n_local, width)
+        Local function k is ``sum_t term_weights[k, t] * q_(terms[k, t])``
+        with ``q_(i n1 + j) = U_i(xi) W_j(eta)``.
+    connectivity : ndarray of int32, shape (n_elements, n_local)
+        Global node of each local function, element ``ix * n_elements_y + iy``.
+    tensor, folded : TensorTables or FoldedTables or None
+        The basis as tensor products, or as tensor products plus a share of
+        the centre one (serendipity).
+    """
+
+    terms: np.ndarray = None
+    term_weights: np.ndarray = None
+    connectivity: np.ndarray = None
+    tensor: "TensorTables | None" = None
+    folded: "FoldedTables | None" = None
+
+    @property
+    def n_local(self) -> int:
+        return self.connectivity.shape[1]
+
+    def _extra(self) -> tuple:
+        return ((self.terms, self.term_weights),)
 
 
 @dataclass(frozen=True)
@@ -197,18 +193,19 @@ def separated_tables(grid) -> BasisTables:
     tensor = _tensor_form(factors_x, factors_y, terms, weights)
     if tensor is not None:
         fx, fy, order = tensor
-        uniform = np.array([*_uniform_run(fx, table_x), *_uniform_run(fy, table_y)], dtype=np.int64)
-        tensor = TensorTables((0,) * fx.shape[1], geometry, n_elements, fx, table_x, fy, table_y, uniform,
+        tensor = TensorTables((0,) * fx.shape[1], geometry, n_elements, fx, table_x, fy, table_y,
+                              _uniform_runs(fx, table_x, fy, table_y),
                               connectivity=np.ascontiguousarray(connectivity[:, order]), order=order)
     factors_x, factors_y, terms, weights = flat
-    uniform = np.array([*_uniform_run(factors_x, table_x), *_uniform_run(factors_y, table_y)], dtype=np.int64)
+    uniform = _uniform_runs(factors_x, table_x, factors_y, table_y)
     folded = None if tensor is not None else _folded_form(factors_x, factors_y, terms, weights, connectivity)
     if folded is not None:
         fold, folded_connectivity, order = folded
         folded = FoldedTables((0,) * factors_x.shape[1], geometry, n_elements, factors_x, table_x, factors_y,
                               table_y, uniform, fold=fold, connectivity=folded_connectivity, order=order)
     return BasisTables((0,) * factors_x.shape[1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
-                       terms, weights, connectivity, uniform, tensor, folded)
+                       uniform, terms=terms, term_weights=weights, connectivity=connectivity, tensor=tensor,
+                       folded=folded)
 
 
 def _lagrange_expansion(local: LocalPolynomials):
@@ -235,6 +232,11 @@ def _lagrange_expansion(local: LocalPolynomials):
         slots[k, : len(nonzero)] = nonzero
         weights[k, : len(nonzero)] = expansion[nonzero, k]
     return lagrange[None].copy(), lagrange[None].copy(), slots, weights
+
+
+def _uniform_runs(factors_x, table_x, factors_y, table_y) -> np.ndarray:
+    """``uniform`` of :class:`_Factors`: the longest run of equal tables along x, then y."""
+    return np.array([*_uniform_run(factors_x, table_x), *_uniform_run(factors_y, table_y)], dtype=np.int64)
 
 
 def _uniform_run(factors, table):

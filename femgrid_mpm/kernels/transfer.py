@@ -43,8 +43,6 @@ import numpy as np
 
 from .basis import function_slots, normalized_squares, point_weights, point_work, tensor_constants, tensor_weights
 
-OUTSIDE = -1
-
 
 @numba.njit(cache=True, inline="always")
 def _relative_velocity(velocity, v_ref, relative):
@@ -55,9 +53,20 @@ def _relative_velocity(velocity, v_ref, relative):
 
 
 @numba.njit(cache=True, inline="always")
-def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, start_motion):
+def _hand_over(p, divergence, ux, uy, start_motion):
+    """What the force pass knows of point p's motion at the step's start and G2P
+    needs (:func:`_move_point`): ``div v`` and ``N @ v_rel``, whose inner sums
+    the gradient's gather already holds."""
+    start_motion[p, 0] = divergence
+    start_motion[p, 1] = ux
+    start_motion[p, 2] = uy
+
+
+@numba.njit(cache=True, inline="always")
+def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, body, strain, stress, start_motion):
     """Paper Eqs. 18 and 6 for point ``p``: strain increment from its velocity
-    gradient, the incremental linear elastic stress, ``div v`` for Eq. 21.
+    gradient, the incremental linear elastic stress; ``div v`` and the
+    interpolated relative velocity ``(ux, uy)`` for G2P (:func:`_hand_over`).
     Returns the new stress (xx, yy, xy)."""
     e_xx = dt * dvx_dx
     e_yy = dt * dvy_dy
@@ -74,7 +83,7 @@ def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, str
     stress[p, 0] = s_xx
     stress[p, 1] = s_yy
     stress[p, 2] = s_xy
-    start_motion[p, 0] = dvx_dx + dvy_dy
+    _hand_over(p, dvx_dx + dvy_dy, ux, uy, start_motion)
     return s_xx, s_yy, s_xy
 
 
@@ -92,9 +101,10 @@ def _clear_sums(absolute, want_volume, assemble, grid_mass, momentum, grid_absol
 
 
 @numba.njit(cache=True, inline="always")
-def _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, start_motion):
-    """Eq. 18 for any material: point p's strain increment (added to its strain),
-    ``dt L`` and ``div v``."""
+def _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, strain_increment, gradient_increment,
+                     start_motion):
+    """Eq. 18 for any material: point p's strain increment (added to its strain)
+    and ``dt L``; ``div v`` and ``(ux, uy)`` for G2P (:func:`_hand_over`)."""
     strain_increment[p, 0] = dt * dvx_dx
     strain_increment[p, 1] = dt * dvy_dy
     strain_increment[p, 2] = dt * (0.5 * (dvx_dy + dvy_dx))
@@ -104,7 +114,7 @@ def _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_incre
     gradient_increment[p, 1] = dt * dvx_dy
     gradient_increment[p, 2] = dt * dvy_dx
     gradient_increment[p, 3] = dt * dvy_dy
-    start_motion[p, 0] = dvx_dx + dvy_dy
+    _hand_over(p, dvx_dx + dvy_dy, ux, uy, start_motion)
 
 
 @numba.njit(cache=True, inline="always")
@@ -253,9 +263,7 @@ def local_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass
         element, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
                                            table_y, form, work)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _local_gradient(element, count, skip, connectivity, relative, w, wx, wy)
-        start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
-        start_motion[p, 2] = uy
-        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress,
+        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, body, strain, stress,
                                                  start_motion)
         total += s_xx + s_yy + s_xy
         volume = mass_p[p] / density_p[p]
@@ -276,9 +284,7 @@ def local_velocity_gradient(x, velocity, v_ref, relative, dt,
         element, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
                                            table_y, form, work)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _local_gradient(element, count, skip, connectivity, relative, w, wx, wy)
-        start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
-        start_motion[p, 2] = uy
-        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, start_motion)
+        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, strain_increment, gradient_increment, start_motion)
 
 
 @numba.njit(cache=True)
@@ -477,9 +483,7 @@ def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mas
     for p in range(x.shape[0]):
         element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
-        start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
-        start_motion[p, 2] = uy
-        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, lame, body, strain, stress, start_motion)
+        s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, body, strain, stress, start_motion)
         total += s_xx + s_yy + s_xy
         volume = mass_p[p] / density_p[p]
         _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, volume * s_xx, volume * s_yy, volume * s_xy,
@@ -498,9 +502,7 @@ def tensor_velocity_gradient(x, velocity, v_ref, relative, dt,
     for p in range(x.shape[0]):
         element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
-        start_motion[p, 1] = ux  # N @ v_rel: G2P moves the point with it
-        start_motion[p, 2] = uy
-        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, strain, strain_increment, gradient_increment, start_motion)
+        _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, strain_increment, gradient_increment, start_motion)
 
 
 @numba.njit(cache=True)
