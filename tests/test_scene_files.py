@@ -99,6 +99,8 @@ BAD_SCENES = [
     ("unknown basis", replaced('basis = "q1"', 'basis = "q3"'), "grid.basis", "\"q3\""),
     ("unknown mass kind", replaced('mass = "lumped"', 'mass = "diagonal"'), "solver.mass", "\"diagonal\""),
     ("unknown negative-mass policy", replaced('mass = "lumped"', 'mass = "lumped"\nnegative_mass = "ignore"'), "solver.negative_mass", "ignore"),
+    ("unknown linear solver", replaced('mass = "lumped"', 'mass = "consistent"\nlinear_solver = "lu"'), "solver.linear_solver", "'auto', 'direct' or 'cg'"),
+    ("zero CG tolerance", replaced('mass = "lumped"', 'mass = "consistent"\ncg_tolerance = 0'), "solver.cg_tolerance", "greater than 0"),
     ("unknown load kind", appended("[[loads]]\nkind = 'magnetic'"), "loads[0].kind", "unknown kind \"magnetic\""),
     ("load without kind", appended("[[loads]]\nacceleration = [0, -1]"), "loads[0].kind", "required key is missing"),
     ("unknown damping kind", appended("[damping]\nkind = 'rayleigh'\ncoefficient = 1.0"), "damping.kind", "rayleigh"),
