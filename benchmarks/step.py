@@ -15,6 +15,11 @@ remedy that lets them run: HRZ mass, ``mass = "hrz"``, is timed for every
 basis); consistent mass <= 5x lumped; fixed cost <= 20 us per step; <= 1 KB per
 particle.
 
+* yardstick: the same q1 lumped step written as plainly as compiled code
+  gets (`minimal_q1.py`: no generality, no frame, no effects, no guards),
+  on the same block at the largest size.  Absolute times depend on the
+  machine; the ratio to the yardstick says what the library's generality
+  costs on the machine at hand.
 * fixed cost: time per step of a 16-point block (2 x 2 cells), lumped mass.
 * memory: peak of Python-tracked allocations (tracemalloc: numpy arrays,
   scipy matrices) while building the simulation and running two steps at
@@ -98,6 +103,22 @@ def per_particle_table(engine: str, sizes, budget: float) -> dict:
                 print(f"  {basis:12s} {mass:10s} {n:>7d}: {results[basis, mass, n]:8.1f} ns per particle-step",
                       file=sys.stderr, flush=True)
     return results
+
+
+def yardstick(n_points: int, budget: float) -> float:
+    """ns per particle-step of :func:`minimal_q1.minimal_step` on the block of about ``n_points``."""
+    import minimal_q1
+
+    state = minimal_q1.block(max(1, int(round(np.sqrt(n_points / 4)))))
+    dt = 0.1 / np.sqrt(1e4 * 0.7 / (1.3 * 0.4) / 1e3)
+    minimal_q1.run(state, steps=2, dt=dt)  # compiled or loaded
+    samples = []
+    start = time.perf_counter()
+    while len(samples) < 3 or time.perf_counter() - start < budget:
+        tick = time.perf_counter()
+        minimal_q1.run(state, steps=1, dt=dt)
+        samples.append(time.perf_counter() - tick)
+    return 1e9 * float(np.median(samples)) / len(state["x"])
 
 
 def fixed_costs(engine: str) -> dict:
@@ -195,6 +216,12 @@ def main(argv=None) -> None:
                       "consistent": "<= 5x lumped"}[mass]
             print(f"| {basis} | {mass} | {cells} | {ratio:.1f}x | {target} |" if mass == "consistent"
                   else f"| {basis} | {mass} | {cells} | | {target} |")
+
+    floor = yardstick(sizes[-1], args.budget)
+    print(f"\nyardstick (benchmarks/minimal_q1.py, the same q1 lumped step with no generality) at "
+          f"{sizes[-1]:.0e} particles: {floor:.0f} ns per particle-step; the library's q1 lumped is "
+          f"{table['q1', 'lumped', sizes[-1]] / floor:.2f}x that, cubic splines lumped "
+          f"{table['bspline3', 'lumped', sizes[-1]] / floor:.2f}x")
 
     costs = fixed_costs(args.engine)
     print("\nfixed cost per step (16 points, lumped; target <= 20 us): "

@@ -46,8 +46,9 @@ in three layers:
 Linear solver: ``"direct"`` factors the matrix once per step with SuperLU
 (both solves of the step reuse the factors) and checks every solution's
 residual, because SuperLU returns garbage without warning on a singular
-matrix.  ``"cg"`` is Jacobi-preconditioned CG warm-started from the last
-two solutions.  ``"auto"`` takes direct up to 5000 active nodes, where it
+matrix.  ``"cg"`` is preconditioned CG (Jacobi; for cubic splines a tensor
+Gram preconditioner completed by an exact solve in a layer along the
+bodies' edges, :class:`BoundaryLayer`), warm-started from the last step.  ``"auto"`` takes direct up to 5000 active nodes, where it
 is much faster (the paper's problems), and CG above.
 """
 
@@ -364,10 +365,12 @@ class ConsistentMass:
     def _prepare(self, matrix: sp.csr_matrix, node_volume: np.ndarray | None, diagonal_index=None) -> None:
         diagonal = matrix.diagonal() if diagonal_index is None else matrix.data[diagonal_index]
         self.active = diagonal > 1e-24 * self.reference_mass
+        self._weak = np.zeros(self.n_nodes, dtype=bool)
         if self.nonnegative and node_volume is not None:
             fraction = np.divide(node_volume, self.node_integrals, out=np.ones(self.n_nodes), where=self.active)
             weak = self.active & (fraction < self.weak_fraction)
             self.weak_nodes = int(weak.sum())
+            self._weak = weak
             if self.weak_nodes:
                 if diagonal_index is None:
                     matrix = _lump_couplings(matrix, weak)
@@ -438,11 +441,19 @@ class ConsistentMass:
         if self._direct:
             return _direct_solve(system.factors, system.matrix, rhs)
         guess = self._initial_guess(rhs, kind, system)
+        tensor = None if self.preconditioner is None else self.preconditioner.scaled(system)
+        layer = None if tensor is None else system.boundary_layer(self.preconditioner.lattice_shape, self._weak)
         solution, converged, iterations = _preconditioned_cg(
-            system.matrix, rhs, guess, system.inverse_diagonal, self.tolerance, self.max_iterations,
-            None if self.preconditioner is None else self.preconditioner.scaled(system)
+            system.matrix, rhs, guess, system.inverse_diagonal, self.tolerance, self.max_iterations, tensor, layer
         )
         self.iterations += iterations
+        if not converged and layer is not None:
+            # the layered preconditioner is positive definite while the tensor one does not
+            # overshoot M by 2x; should it fail, the tensor one alone decides
+            solution, converged, iterations = _preconditioned_cg(
+                system.matrix, rhs, guess, system.inverse_diagonal, self.tolerance, self.max_iterations, tensor
+            )
+            self.iterations += iterations
         return solution, converged
 
     def _initial_guess(self, rhs: np.ndarray, kind: str, system: "_System") -> np.ndarray:
@@ -493,6 +504,14 @@ class _System:
     inverse_diagonal: np.ndarray
     factors: object
     blended: bool = False
+    _layer: "BoundaryLayer | None | bool" = False  # False: not built yet
+
+    def boundary_layer(self, lattice_shape: tuple, weak: np.ndarray) -> "BoundaryLayer | None":
+        """CG's boundary layer (:class:`BoundaryLayer`), built at the first solve of the
+        step and shared by the velocity and acceleration solves."""
+        if self._layer is False:
+            self._layer = BoundaryLayer.build(self.matrix, self.excluded, weak, lattice_shape)
+        return self._layer
 
     @classmethod
     def build(cls, matrix: sp.csr_matrix, columns: list, excluded: np.ndarray, direct: bool,
@@ -517,6 +536,7 @@ class _System:
         self.inverse_diagonal = 1.0 / self.matrix.diagonal()
         self.factors = _factor(self.matrix) if direct else None
         self.blended = True
+        self._layer = False
 
 
 #: a pivot this small against its own diagonal entry means singular.
@@ -796,11 +816,94 @@ class TensorPreconditioner:
     factor_y: np.ndarray
     gram_diagonal: float
 
+    @property
+    def lattice_shape(self) -> tuple[int, int]:
+        """Nodes along x and y (node ``ix * n_y + iy``)."""
+        return self.factor_x.shape[1], self.factor_y.shape[1]
+
     def scaled(self, system: "_System") -> tuple:
         """The arguments of :func:`_apply_tensor` for one system."""
         diagonal = 1.0 / system.inverse_diagonal
         scale = np.where(system.excluded, 0.0, 1.0 / np.sqrt(np.abs(diagonal) / self.gram_diagonal))
         return (scale, system.excluded, self.factor_x, self.factor_y)
+
+
+#: lattice steps from an excluded or weak node, or from the lattice's edge, within
+#: which :class:`BoundaryLayer` solves exactly (2: 5 + 2 CG iterations per step
+#: for cubic splines at 1e5 points, 3: 4 + 1, 4: 3 + 1 at twice the factoring cost)
+LAYER_WIDTH = 3
+
+
+@dataclass
+class BoundaryLayer:
+    """Completes :class:`TensorPreconditioner` where a body's edge makes ``M`` unlike a tensor product.
+
+    The tensor preconditioner is exact for a uniform body that fills the
+    lattice; near an edge (partly filled supports, lumped weak nodes, a
+    support's excluded nodes) it is not, and CG's residual lingers there:
+    after 8 iterations, 90% of it sat within 3 nodes of an excluded one
+    (cubic splines, 1e5 points).  The layer of nodes within
+    :data:`LAYER_WIDTH` of such nodes gets an exact solve with its block
+    ``M_LL`` (SuperLU, factored once per step), in a symmetric
+    multiplicative Schwarz sweep, layer - tensor - layer::
+
+        z  = R^T M_LL^-1 R r
+        z += T^-1 (r - M z)
+        z += R^T M_LL^-1 R (r - M z)
+
+    ``M z`` needs only the layer's rows (``M`` is symmetric, ``z`` lives on
+    the layer in the first product), so a sweep costs the tensor solve, two
+    small triangular solves and two products with the layer's rows.  The
+    sweep is symmetric, and positive definite while ``T^-1 M`` has no
+    eigenvalue above 2 (the tensor preconditioner does not overshoot); CG
+    checks that as it goes (``r.z > 0``) and :class:`ConsistentMass` falls
+    back to the tensor preconditioner alone if it fails.  Cubic splines,
+    1e5 points: 5 + 14 -> 1 + 4 iterations per step (velocity + acceleration),
+    for ~5 ms of factoring per step.
+
+    Attributes
+    ----------
+    nodes : ndarray of int, shape (n_layer,)
+    factors : SuperLU of ``M_LL``
+    rows : csr_matrix, shape (n_layer, n_nodes)
+        ``M[nodes, :]``.
+    columns : csr_matrix, shape (n_nodes, n_layer)
+        ``M[:, nodes]``, the transpose of ``rows``.
+    """
+
+    nodes: np.ndarray
+    factors: object
+    rows: sp.csr_matrix
+    columns: sp.csr_matrix
+
+    @classmethod
+    def build(cls, matrix: sp.csr_matrix, excluded: np.ndarray, weak: np.ndarray,
+              lattice_shape: tuple) -> "BoundaryLayer | None":
+        """The layer of a system, or None if it is empty or its block singular
+        (CG then meets the singularity and reports it, as without a layer)."""
+        from scipy.ndimage import maximum_filter
+
+        irregular = np.pad((excluded | weak).reshape(lattice_shape), LAYER_WIDTH, constant_values=True)
+        near = maximum_filter(irregular, size=2 * LAYER_WIDTH + 1)[LAYER_WIDTH:-LAYER_WIDTH, LAYER_WIDTH:-LAYER_WIDTH]
+        nodes = np.flatnonzero(near.ravel() & ~excluded)
+        if nodes.size == 0:
+            return None
+        plain = sp.csr_matrix((matrix.data, matrix.indices, matrix.indptr), shape=matrix.shape)
+        rows = plain[nodes]
+        factors = _factor(rows[:, nodes])
+        if factors is None:
+            return None
+        columns = rows.T.tocsr()
+        return cls(nodes, factors, _CompiledCSR(rows), _CompiledCSR(columns))
+
+    def sweep(self, r: np.ndarray, tensor_solve) -> np.ndarray:
+        """``z = P^-1 r`` for r of shape (n_nodes, k); ``tensor_solve(v)`` is ``T^-1 v``."""
+        nodes = self.nodes
+        z = np.zeros_like(r)
+        z[nodes] = self.factors.solve(np.ascontiguousarray(r[nodes]))
+        z += tensor_solve(r - self.columns @ z[nodes])
+        z[nodes] += self.factors.solve(np.ascontiguousarray(r[nodes] - self.rows @ z))
+        return z
 
 
 def tensor_preconditioner(grid) -> TensorPreconditioner | None:
@@ -898,32 +1001,60 @@ def _lump_couplings(matrix: sp.csr_matrix, weak: np.ndarray) -> sp.csr_matrix:
     return (kept + sp.diags(to_diagonal)).tocsr()
 
 
-def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=None):
-    """Jacobi-preconditioned CG on the columns of ``b`` (n, k) at once.
+@numba.njit(cache=True)
+def _cg_advance(x, r, p, Ap, alpha, residual):
+    """``x += alpha p``, ``r -= alpha Ap`` column by column; ``residual`` gets ``r.r``."""
+    residual[:] = 0.0
+    for i in range(x.shape[0]):
+        for c in range(x.shape[1]):
+            x[i, c] += alpha[c] * p[i, c]
+            r[i, c] -= alpha[c] * Ap[i, c]
+            residual[c] += r[i, c] * r[i, c]
+
+
+@numba.njit(cache=True)
+def _cg_direction(p, z, beta):
+    """``p = z + beta p`` column by column, in place."""
+    for i in range(p.shape[0]):
+        for c in range(p.shape[1]):
+            p[i, c] = z[i, c] + beta[c] * p[i, c]
+
+
+def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=None, layer=None):
+    """Preconditioned CG on the columns of ``b`` (n, k) at once: Jacobi, or the
+    arguments of :func:`_apply_tensor` (``tensor``), completed by a
+    :class:`BoundaryLayer` (``layer``).
 
     Returns ``(x, converged, iterations)``.  Converged means every column's
     residual fell to ``rtol * |b|``.  A non-positive curvature ``p.A.p``
-    (singular matrix met by an inconsistent right-hand side) stops the
+    (singular matrix met by an inconsistent right-hand side) or a negative
+    ``r.z`` (a preconditioner that is not positive definite) stops the
     iteration as not converged.
     """
-    if isinstance(A, _CompiledCSR):
+    if isinstance(A, _CompiledCSR) and layer is None:
         return _compiled_cg(A.indptr, A.indices, A.data, np.ascontiguousarray(b, dtype=float),
                             np.ascontiguousarray(x0, dtype=float), inverse_diagonal, rtol, max_iterations,
                             *(_NO_TENSOR if tensor is None else (True, *tensor)))
 
+    def tensor_solve(r):
+        return _apply_tensor(np.ascontiguousarray(r), np.empty_like(r), *tensor)
+
     def precondition(r):
         if tensor is None:
             return inverse_diagonal[:, None] * r
-        return _apply_tensor(np.ascontiguousarray(r), np.empty_like(r), *tensor)
+        return tensor_solve(r) if layer is None else layer.sweep(r, tensor_solve)
 
-    x = x0.copy()
+    # the vector updates in compiled passes (numpy's temporaries took as long as the products)
+    b = np.ascontiguousarray(b, dtype=float)
+    x = np.array(x0, dtype=float)
     target = rtol * np.linalg.norm(b, axis=0)
     r = b - A @ x
     z = precondition(r)
     p = z.copy()
     rz = np.einsum("ij,ij->j", r, z)
+    residual = np.einsum("ij,ij->j", r, r)
     for iteration in range(max_iterations + 1):
-        if np.all(np.linalg.norm(r, axis=0) <= target) or not np.any(rz):
+        if np.all(np.sqrt(residual) <= target) or not np.any(rz):
             return x, True, iteration
         if iteration == max_iterations:
             break
@@ -932,11 +1063,12 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=
         if np.any((curvature <= 0) & (rz != 0)):
             return x, False, iteration
         alpha = np.divide(rz, curvature, out=np.zeros_like(rz), where=curvature > 0)
-        x += alpha * p
-        r -= alpha * Ap
+        _cg_advance(x, r, p, Ap, alpha, residual)
         z = precondition(r)
         rz_new = np.einsum("ij,ij->j", r, z)
+        if np.any(rz_new < 0):
+            return x, False, iteration + 1
         beta = np.divide(rz_new, rz, out=np.zeros_like(rz), where=rz != 0)
-        p = z + beta * p
+        _cg_direction(p, z, beta)
         rz = rz_new
     return x, False, max_iterations

@@ -127,10 +127,12 @@ class CompiledTransfer:
         # consistent mass: assembled in the P2G pass into a pattern fixed per grid
         self.pattern = None
         self._no_pattern = (np.zeros(2, np.int32), np.zeros((1, 1), np.int32), np.zeros(1, dtype=bool),
-                            np.zeros((1, 1), np.int32), np.zeros(1))
+                            np.zeros((1, 1), np.int32), 0, False, np.zeros(0, np.int32), np.zeros(0, np.int32),
+                            np.zeros(1))
         if hasattr(simulation.mass, "assemble_pattern"):
             connectivity = tables.connectivity
             self.pattern = mass_pattern(grid, connectivity)
+            self._ordered = family == "tensor" and _ordered_slots(self.pattern, len(tables.marker))
             self.want_volume = True
             self.grid_volume = np.zeros(n_nodes)
         # threads: chunked variants of the tensor kernels (lumped P2G, linear elastic stress, G2P)
@@ -169,8 +171,9 @@ class CompiledTransfer:
             outside = self._p2g(
                 p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, self.want_volume, pattern is not None,
                 self.hrz, *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum,
-                *(self._no_pattern if pattern is None else (pattern.indptr, pattern.rank, pattern.complete, pattern.slots,
-                                                    pattern.data)),
+                *(self._no_pattern if pattern is None else (
+                    pattern.indptr, pattern.rank, pattern.complete, pattern.slots, pattern.centre, self._ordered,
+                    pattern.mirror_target, pattern.mirror_source, pattern.data)),
             )
         if outside >= 0:
             self.grid.locate(p.x)  # raises the ValueError naming the points outside
@@ -230,6 +233,16 @@ class CompiledTransfer:
             p.v += increment
             total += float(increment.sum())
         return total + self._stress_total
+
+
+def _ordered_slots(pattern, n1: int) -> bool:
+    """Whether the stencil slots in tensor order are what :func:`~.transfer.tensor_p2g`'s
+    fast path assumes: those of ``b = (k, l)`` seen from ``a = (i, j)`` consecutive in
+    ``l``, and at least the centre exactly when ``(k, l) >= (i, j)``."""
+    i, j, k, l = np.meshgrid(*(np.arange(n1),) * 4, indexing="ij")
+    slots = pattern.slots.reshape(n1, n1, n1, n1)
+    upper = (k > i) | ((k == i) & (l >= j))
+    return bool(np.array_equal(slots, slots[..., :1] + l) and np.array_equal(slots >= pattern.centre, upper))
 
 
 class ShapeFunctionMatrices:

@@ -47,12 +47,13 @@ def parallel_p2g(x, v, mass_p, density_p, v_ref, signed,
     no_table = np.zeros((1, 1), np.int32)
     no_flags = np.zeros(1, dtype=np.bool_)
     no_matrix = np.zeros(1)
+    no_mirror = np.zeros(0, np.int32)
     for chunk in prange(n_chunks):
         start, stop = _bounds(chunk, n_chunks, n)
         found = tensor_p2g(x[start:stop], v[start:stop], mass_p[start:stop], density_p[start:stop], v_ref, signed,
                            False, False, False, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
                            connectivity, mass_parts[chunk], absolute_parts[chunk], no_volume, momentum_parts[chunk],
-                           no_index, no_table, no_flags, no_table, no_matrix)
+                           no_index, no_table, no_flags, no_table, 0, False, no_mirror, no_mirror, no_matrix)
         if found >= 0:
             outside[chunk] = start + found
     for chunk in range(n_chunks):

@@ -42,6 +42,16 @@ class MassPattern:
         kernels' local order.
     diagonal : ndarray of int64, shape (n_nodes,)
         Position of each row's diagonal entry in ``data``.
+    centre : int
+        The stencil slot of a node seen from itself.  The stencil is sorted
+        and symmetric, so slot ``s`` seen from the other node is
+        ``2 * centre - s``.
+    mirror_target, mirror_source : ndarray of int32, shape (nnz - n_nodes) / 2
+        The kernels assemble only the entries with slot >= centre (the
+        upper half in stencil order: 136 of a cubic point's 256 products)
+        and copy each other entry from its transpose,
+        ``data[mirror_target] = data[mirror_source]``: fewer scattered
+        additions, and a matrix symmetric bit for bit.
     """
 
     indptr: np.ndarray
@@ -51,6 +61,9 @@ class MassPattern:
     slots: np.ndarray
     diagonal: np.ndarray
     complete: np.ndarray
+    centre: int
+    mirror_target: np.ndarray
+    mirror_source: np.ndarray
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -108,8 +121,18 @@ def mass_pattern(grid, connectivity: np.ndarray) -> MassPattern:
     columns = neighbour[present]  # row-major: each row's slots in stencil order
     if np.any(columns < 0):
         raise AssertionError("a coupled node is missing from the lattice")
-    center = int(np.flatnonzero((stencil == 0).all(axis=1))[0])
-    diagonal = indptr[:-1] + rank[:, center]
+    centre = int(np.flatnonzero((stencil == 0).all(axis=1))[0])
+    diagonal = indptr[:-1] + rank[:, centre]
     complete = counts == len(stencil)
     assert np.array_equal(rank[complete], np.broadcast_to(np.arange(len(stencil)), rank[complete].shape))
-    return MassPattern(indptr.astype(np.int32), columns, np.zeros(int(indptr[-1])), rank, slots, diagonal, complete)
+    if not np.array_equal(stencil[::-1], -stencil):
+        raise AssertionError("the stencil is not symmetric")
+    # the lower half in stencil order, and where each entry's transpose sits
+    rows, lower = np.nonzero(present[:, :centre])
+    mirror_target = indptr[rows] + rank[rows, lower]
+    transposed = neighbour[rows, lower]
+    mirror_source = indptr[transposed] + rank[transposed, 2 * centre - lower]
+    if np.any(rank[transposed, 2 * centre - lower] < 0):
+        raise AssertionError("the pattern is not symmetric")
+    return MassPattern(indptr.astype(np.int32), columns, np.zeros(int(indptr[-1])), rank, slots, diagonal, complete,
+                       centre, mirror_target.astype(np.int32), mirror_source.astype(np.int32))

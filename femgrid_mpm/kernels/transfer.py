@@ -88,6 +88,13 @@ def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, b
 
 
 @numba.njit(cache=True, inline="always")
+def _mirror(matrix, mirror_target, mirror_source):
+    """The assembled mass matrix's lower half (stencil order) from its upper half."""
+    for t in range(mirror_target.shape[0]):
+        matrix[mirror_target[t]] = matrix[mirror_source[t]]
+
+
+@numba.njit(cache=True, inline="always")
 def _clear_sums(absolute, want_volume, assemble, grid_mass, momentum, grid_absolute, grid_volume, matrix):
     """Zero what a P2G pass sums into: mass, momentum and what it is asked for."""
     grid_mass[:] = 0.0
@@ -178,9 +185,11 @@ def _local_force(element, count, skip, connectivity, wx, wy, w_xx, w_yy, w_xy, f
 @numba.njit(cache=True)
 def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity,
-              grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, matrix):
+              grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, centre,
+              ordered, mirror_target, mirror_source, matrix):
     """Scatter mass, relative momentum (and the mass matrix, into the fixed
-    pattern of :mod:`.pattern`) to the grid.
+    pattern of :mod:`.pattern`: the products of slot >= ``centre``, then the
+    rest copied from their transposes) to the grid.
 
     Returns the first point outside the grid, or -1.
     """
@@ -230,7 +239,7 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
             for k in range(count):
                 if k != skip:
                     grid_volume[connectivity[element, k]] += w[k] * volume
-        if assemble:
+        if assemble:  # the upper half in stencil order; the rest is mirrored after the pass
             for k in range(count):
                 if k != skip:
                     node = connectivity[element, k]
@@ -238,9 +247,11 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
                     start = indptr[node]
                     full = complete[node]
                     for j in range(count):
-                        if j != skip:
-                            slot = slots[k, j]
+                        slot = slots[k, j]
+                        if j != skip and slot >= centre:
                             matrix[start + (slot if full else rank[node, slot])] += weighted * w[j]
+    if assemble:
+        _mirror(matrix, mirror_target, mirror_source)
     return -1
 
 
@@ -354,8 +365,18 @@ def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
 @numba.njit(cache=True)
 def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
-               grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, matrix):
-    """:func:`local_p2g` for tensor-product bases (``slots`` in tensor order)."""
+               grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, centre,
+               ordered, mirror_target, mirror_source, matrix):
+    """:func:`local_p2g` for tensor-product bases (``slots`` in tensor order).
+
+    ``ordered``: the 1D factors are in the order of their nodes along the
+    axis (q1, cubic splines; not q2, whose middle node comes last), checked
+    by the engine.  Then the slot of ``b = (k, l)`` seen from ``a = (i, j)``
+    is at least ``centre`` exactly when ``(k, l) >= (i, j)``
+    lexicographically (a test on the indices of fully unrolled loops, so
+    decided at compile time: a loop from ``k = i`` instead was 25% slower),
+    and in a complete row the slots of ``l = 0 .. n1 - 1`` are consecutive.
+    """
     n1 = len(marker)
     _clear_sums(signed or hrz, want_volume, assemble, grid_mass, momentum, grid_absolute, grid_volume, matrix)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
@@ -408,19 +429,30 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                 v_i = fx[i] * volume
                 for j in range(n1):
                     grid_volume[connectivity[element, i * n1 + j]] += v_i * fy[j]
-        if assemble:
+        if assemble:  # the upper half, (k, l) >= (i, j); the rest is mirrored after the pass
             for i in range(n1):
                 for j in range(n1):
                     a = i * n1 + j
                     node = connectivity[element, a]
                     start = indptr[node]
-                    full = complete[node]
                     m_a = fx[i] * fy[j] * m
-                    for k in range(n1):
-                        m_ak = m_a * fx[k]
-                        for l in range(n1):
-                            slot = slots[a, k * n1 + l]
-                            matrix[start + (slot if full else rank[node, slot])] += m_ak * fy[l]
+                    full = complete[node]
+                    if ordered and full:
+                        for k in range(n1):
+                            m_ak = m_a * fx[k]
+                            first = start + slots[a, k * n1]
+                            for l in range(n1):
+                                if k > i or (k == i and l >= j):
+                                    matrix[first + l] += m_ak * fy[l]
+                    else:
+                        for k in range(n1):
+                            m_ak = m_a * fx[k]
+                            for l in range(n1):
+                                slot = slots[a, k * n1 + l]
+                                if slot >= centre:
+                                    matrix[start + (slot if full else rank[node, slot])] += m_ak * fy[l]
+    if assemble:
+        _mirror(matrix, mirror_target, mirror_source)
     return -1
 
 
