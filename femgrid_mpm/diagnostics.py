@@ -61,8 +61,10 @@ class NegativeMassMonitor:
     first_step_below_threshold: int | None = None
     max_below_threshold: int = 0
 
-    def check(self, lumped: np.ndarray, step: int, time: float, nodes: np.ndarray) -> None:
-        ratio = lumped.min() / self.reference_mass
+    def check(self, lumped: np.ndarray, step: int, time: float, nodes: np.ndarray, smallest: float | None = None) -> None:
+        """Record (and under "error" or "warn", report) negative masses in ``lumped``;
+        ``smallest``, its minimum if known."""
+        ratio = (lumped.min() if smallest is None else smallest) / self.reference_mass
         self.min_ratio = min(self.min_ratio, float(ratio))
         if ratio >= -1e-12:
             return

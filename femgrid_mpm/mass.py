@@ -99,6 +99,8 @@ class LumpedMass:
     active: np.ndarray = field(init=False, repr=False)
     #: nodes below the threshold at the last assembly
     nodes_below_threshold: int = field(default=0, init=False)
+    #: the smallest of ``lumped`` when the compiled sums were assembled, else None
+    smallest: float | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self):
         if self.threshold is not None:
@@ -116,6 +118,7 @@ class LumpedMass:
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
         self.lumped = N.T @ m_p
+        self.smallest = None
         absolute = _absolute_mass(N, m_p, self.lumped)
         self.active = (np.abs(self.lumped) > 1e-6 * absolute) & (absolute > 1e-12 * self.reference_mass)
         self._inverse = np.divide(1.0, self.lumped, out=np.zeros(self.n_nodes), where=self.active)
@@ -130,7 +133,7 @@ class LumpedMass:
             self.active = np.zeros(len(lumped), dtype=bool)
         self.lumped = lumped
         absolute = lumped if absolute is None else absolute
-        _lumped_inverse(lumped, absolute, self.reference_mass, self._inverse, self.active)
+        self.smallest = _lumped_inverse(lumped, absolute, self.reference_mass, self._inverse, self.active)
         self._replace(absolute, volume)
 
     def _replace(self, absolute: np.ndarray, volume: np.ndarray | None) -> None:
@@ -162,7 +165,7 @@ class LumpedMass:
 
     def solve(self, rhs: np.ndarray, kind: str = "velocity") -> np.ndarray:
         """``rhs / m_i`` on active nodes, zero elsewhere; rhs shape (n_nodes, 2)."""
-        return rhs * self._inverse[:, None]
+        return _scaled_rows(rhs, self._inverse)
 
     def inverses(self) -> tuple[np.ndarray, np.ndarray]:
         """The diagonal inverses ``(velocity, acceleration)`` of the last assembly."""
@@ -601,10 +604,24 @@ def _absolute_mass(N: sp.csr_matrix, m_p: np.ndarray, lumped: np.ndarray) -> np.
 
 @numba.njit(cache=True)
 def _lumped_inverse(lumped, absolute, reference_mass, inverse, active):
-    """:func:`_active` and ``1 / m_i`` on the active nodes, from the sums."""
+    """:func:`_active` and ``1 / m_i`` on the active nodes, from the sums; returns the
+    smallest ``m_i`` (for the negative-mass check, which would otherwise pass over them again)."""
+    smallest = np.inf
     for i in range(len(lumped)):
         active[i] = abs(lumped[i]) > 1e-6 * absolute[i] and absolute[i] > 1e-12 * reference_mass
         inverse[i] = 1.0 / lumped[i] if active[i] else 0.0
+        smallest = min(smallest, lumped[i])
+    return smallest
+
+
+@numba.njit(cache=True)
+def _scaled_rows(rhs, inverse):
+    """``rhs * inverse[:, None]`` into a new array (numpy's broadcasting cost ~1 us a step)."""
+    out = np.empty_like(rhs)
+    for i in range(rhs.shape[0]):
+        for c in range(rhs.shape[1]):
+            out[i, c] = rhs[i, c] * inverse[i]
+    return out
 
 
 @numba.njit(cache=True)

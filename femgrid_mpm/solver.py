@@ -217,8 +217,12 @@ class Simulation:
             relative_momentum = self.transfer.to_grid(ctx, self.mass)
         except ValueError as error:
             raise self._stop(f"a particle left the grid: {error}", "particle_left_grid") from None
-        for lumped in getattr(self.mass, "field_lumped", [self.mass.lumped]):  # each field divides by its own
-            self.negative_mass.check(lumped, ctx.step, ctx.time, self.grid.nodes)
+        if hasattr(self.mass, "field_lumped"):  # each field divides by its own
+            for lumped in self.mass.field_lumped:
+                self.negative_mass.check(lumped, ctx.step, ctx.time, self.grid.nodes)
+        else:
+            self.negative_mass.check(self.mass.lumped, ctx.step, ctx.time, self.grid.nodes,
+                                     getattr(self.mass, "smallest", None))
         self.negative_mass.record_below_threshold(getattr(self.mass, "nodes_below_threshold", 0), ctx.step)
         try:  # Eq. 17: v = M^-1 p_rel + v_ref, and the momentum p_rel + m v_ref
             ctx.momentum, ctx.velocity = self.mass.grid_velocity(relative_momentum, ctx.frame_velocity)
