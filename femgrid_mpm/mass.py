@@ -1069,6 +1069,8 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=
     z = precondition(r)
     p = z.copy()
     rz = np.einsum("ij,ij->j", r, z)
+    if np.any(rz < 0):
+        return x, False, 0
     residual = np.einsum("ij,ij->j", r, r)
     for iteration in range(max_iterations + 1):
         if np.all(np.sqrt(residual) <= target) or not np.any(rz):

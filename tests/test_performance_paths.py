@@ -93,6 +93,32 @@ def test_boundary_layer_is_symmetric_positive_definite_and_cuts_iterations():
     assert 0 < 2 * layered[2] < alone[2]
 
 
+def test_a_layer_that_is_not_positive_definite_falls_back_to_the_tensor_preconditioner(monkeypatch):
+    """CG stops as soon as ``r.z < 0``; the solve then runs again with the tensor
+    preconditioner alone and still reaches SuperLU's solution."""
+    from femgrid_mpm.mass import _System
+
+    class Negative:
+        def sweep(self, r, tensor_solve):
+            return -tensor_solve(r)
+
+    simulation = Simulation(block_scene("bspline3", "consistent", 400))
+    mass = simulation.mass
+    mass.linear_solver = "cg"
+    mass.tolerance = 1e-12
+    simulation.advance()
+    monkeypatch.setattr(_System, "boundary_layer", lambda self, shape, weak: Negative())
+    system = mass._systems[0]
+    rhs = np.where(system.excluded[:, None], 0.0, simulation.context.force)
+    tensor = mass.preconditioner.scaled(system)
+    assert not _preconditioned_cg(system.matrix, rhs, np.zeros_like(rhs), system.inverse_diagonal, 1e-12, 100,
+                                  tensor, Negative())[1]
+    solution, converged = mass._solve(system, rhs, "check")
+    assert converged
+    expected = spla.spsolve(system.matrix.tocsc(), rhs)
+    np.testing.assert_allclose(solution, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
+
+
 def test_compiled_csr_product():
     rng = np.random.default_rng(2)
     import scipy.sparse as sp
