@@ -48,8 +48,9 @@ Linear solver: ``"direct"`` factors the matrix once per step with SuperLU
 residual, because SuperLU returns garbage without warning on a singular
 matrix.  ``"cg"`` is preconditioned CG (Jacobi; for cubic splines a tensor
 Gram preconditioner completed by an exact solve in a layer along the
-bodies' edges, :class:`BoundaryLayer`), warm-started from the last step.  ``"auto"`` takes direct up to 5000 active nodes, where it
-is much faster (the paper's problems), and CG above.
+bodies' edges, :class:`BoundaryLayer`), warm-started from the last step.
+``"auto"`` takes direct up to 5000 active nodes (exact, and its pivots
+detect a singular matrix; the paper's problems), and CG above.
 """
 
 from __future__ import annotations
@@ -846,8 +847,9 @@ class TensorPreconditioner:
 
 
 #: lattice steps from an excluded or weak node, or from the lattice's edge, within
-#: which :class:`BoundaryLayer` solves exactly (2: 5 + 2 CG iterations per step
-#: for cubic splines at 1e5 points, 3: 4 + 1, 4: 3 + 1 at twice the factoring cost)
+#: which :class:`BoundaryLayer` solves exactly.  Velocity + acceleration CG iterations
+#: per step for cubic splines at 1e5 points: width 2: 2 + 5, 3: 1 + 4 (5 ms of
+#: factoring), 4: 1 + 3 (8 ms)
 LAYER_WIDTH = 3
 
 
