@@ -154,7 +154,8 @@ class EnergyGuard:
 
     def bound(self, work: dict) -> float:
         """The energy (J per unit thickness) above which the run has run away."""
-        return self.factor * (self.initial + sum(abs(w) for w in work.values()) + self.floor)
+        external = sum(abs(w) for w in work.values()) if work else 0.0
+        return self.factor * (self.initial + external + self.floor)
 
     def check(self, energy: float, what: str, work: dict, step: int, time: float) -> None:
         """Raise :class:`SimulationStopped` (reason ``runaway_energy``) if ``energy`` is above the bound."""
