@@ -280,8 +280,8 @@ def test_assembled_mass_matrix_is_symmetric_and_matches_the_product(basis):
     copy the rest from the transposes: the matrix is symmetric bit for bit, and agrees
     with scipy's product of the same points' ``N`` to 1e-12 of its largest entry.  The
     fast path (consecutive slots) serves q1 and the splines; q2 (middle node last in its
-    1D order), serendipity (folded kernels) and the rows at the body's edge take the
-    general one."""
+    1D order), serendipity (folded kernels) and the incomplete rows at the grid's edge
+    take the general one."""
     import scipy.sparse as sp
 
     scene = block_scene(basis, "consistent", "numba")

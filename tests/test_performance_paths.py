@@ -69,7 +69,7 @@ def test_boundary_layer_is_symmetric_positive_definite_and_cuts_iterations():
     tensor one elsewhere: layer - tensor - layer) on a real system: symmetric and
     positive definite as an explicit matrix, and CG with it reaches SuperLU's solution
     (to 1e-9) in less than half the iterations of the tensor preconditioner alone."""
-    simulation = Simulation(block_scene("bspline3", "consistent", 400))
+    simulation = Simulation(block_scene("bspline3", "consistent", 2500))  # a layer below LAYER_LIMIT
     mass = simulation.mass
     mass.linear_solver = "cg"
     simulation.advance()
@@ -93,9 +93,36 @@ def test_boundary_layer_is_symmetric_positive_definite_and_cuts_iterations():
     assert 0 < 2 * layered[2] < alone[2]
 
 
+def test_no_boundary_layer_for_a_thin_body():
+    """A body 3 cells thick lies within the layer's width of its edges everywhere: the
+    layer would hold every kept node (above LAYER_LIMIT), so it is not built, and CG
+    with the tensor preconditioner alone still solves the system."""
+    from femgrid_mpm.mass import LAYER_LIMIT
+    from femgrid_mpm.scene import Scene
+
+    scene = Scene.model_validate({
+        "grid": {"basis": "bspline3", "lower": [0, 0], "upper": [20, 7], "spacing": 1.0},
+        "time": {"dt": 0.01, "end": 1.0},
+        "solver": {"mass": "consistent", "linear_solver": "cg"},
+        "bodies": [{"name": "strip", "lower": [2, 2], "upper": [18, 5], "points_per_cell": 3,
+                    "velocity": ["0.01*sin(pi*(x-2)/16)", "0"], "material": {"E": 1e4, "nu": 0.3, "density": 1e3}}],
+    })
+    simulation = Simulation(scene)
+    simulation.advance()
+    mass = simulation.mass
+    system = mass._systems[0]
+    assert system.boundary_layer(mass.preconditioner.lattice_shape, mass._weak) is None
+    assert LAYER_LIMIT < 1
+    rhs = np.where(system.excluded[:, None], 0.0, simulation.context.force)
+    solution, converged = mass._solve(system, rhs, "check")
+    expected = spla.spsolve(system.matrix.tocsc(), rhs)
+    assert converged
+    np.testing.assert_allclose(solution, expected, rtol=0, atol=1e-5 * np.abs(expected).max())
+
+
 def test_a_layer_that_is_not_positive_definite_falls_back_to_the_tensor_preconditioner(monkeypatch):
-    """CG stops as soon as ``r.z < 0``; the solve then runs again with the tensor
-    preconditioner alone and still reaches SuperLU's solution."""
+    """CG stops as soon as ``r.z < 0`` (``converged`` None); the solve then runs again
+    with the tensor preconditioner alone and still reaches SuperLU's solution."""
     from femgrid_mpm.mass import _System
 
     class Negative:
@@ -111,8 +138,8 @@ def test_a_layer_that_is_not_positive_definite_falls_back_to_the_tensor_precondi
     system = mass._systems[0]
     rhs = np.where(system.excluded[:, None], 0.0, simulation.context.force)
     tensor = mass.preconditioner.scaled(system)
-    assert not _preconditioned_cg(system.matrix, rhs, np.zeros_like(rhs), system.inverse_diagonal, 1e-12, 100,
-                                  tensor, Negative())[1]
+    assert _preconditioned_cg(system.matrix, rhs, np.zeros_like(rhs), system.inverse_diagonal, 1e-12, 100,
+                              tensor, Negative())[1] is None
     solution, converged = mass._solve(system, rhs, "check")
     assert converged
     expected = spla.spsolve(system.matrix.tocsc(), rhs)
