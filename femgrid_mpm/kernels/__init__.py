@@ -5,10 +5,12 @@
               :meth:`femgrid_mpm.Grid.shape_functions` (which stays the
               scikit-fem-backed definition) to 1e-12 in ``tests/test_kernels.py``.
 ``transfer``  the three passes over the points of a step: ``p2g`` (mass,
-              momentum, consistent mass matrix), ``*_stress_and_force`` (Eqs.
-              18, 6, 11 fused for linear elasticity), ``g2p`` (Eqs. 19-21);
-              ``tensor_*`` kernels (q1, q2, cubic splines: unrolled loops, sum
-              factorization) and ``flat_*`` kernels (any basis: serendipity).
+              momentum, consistent mass matrix; ``p2g_sums`` without the
+              matrix), ``*_stress_and_force`` (Eqs. 18, 6, 11 fused for linear
+              elasticity), ``g2p`` (Eqs. 19-21); ``tensor_*`` kernels (q1, q2,
+              cubic splines: unrolled loops, sum factorization) and ``local_*``
+              kernels (function by function: serendipity's folded form, and
+              the flat tables for any other basis).
 ``pattern``   the consistent mass matrix's sparsity, fixed per grid, so that the
               P2G pass assembles it in place.
 ``engines``   :class:`~.engines.ScipyTransfer` (the reference: the paper's
@@ -17,6 +19,6 @@
               ``[solver] engine``.
 
 Every kernel is serial, ``cache=True`` (compiled once per machine, then
-loaded: about 20 s the first time for every basis and mass kind) and
+loaded: about 30-45 s the first time for every basis and mass kind) and
 ``fastmath=False``: results are reproducible bit for bit from run to run.
 """

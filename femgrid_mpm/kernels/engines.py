@@ -101,9 +101,11 @@ class CompiledTransfer:
         self.family = family
         self._arrays = tables.arrays()
         kind = "tensor" if family == "tensor" else "local"  # the flat and folded forms share kernels
-        self._p2g, self._stress_and_force, self._velocity_gradient, self._internal_force, self._g2p = (
+        (self._p2g, self._p2g_sums, self._stress_and_force, self._velocity_gradient, self._internal_force,
+         self._g2p) = (
             getattr(kernels, f"{kind}_{name}")
-            for name in ("p2g", "linear_elastic_stress_and_force", "velocity_gradient", "internal_force", "g2p")
+            for name in ("p2g", "p2g_sums", "linear_elastic_stress_and_force", "velocity_gradient", "internal_force",
+                         "g2p")
         )
         self.signed = not grid.nonnegative
         self.matrices = ShapeFunctionMatrices(grid, self.basis)
@@ -127,9 +129,6 @@ class CompiledTransfer:
         self._stress_total = 0.0
         # consistent mass: assembled in the P2G pass into a pattern fixed per grid
         self.pattern = None
-        self._no_pattern = (np.zeros(2, np.int32), np.zeros((1, 1), np.int32), np.zeros(1, dtype=bool),
-                            np.zeros((1, 1), np.int32), 0, False, np.zeros(0, np.int32), np.zeros(0, np.int32),
-                            np.zeros(1))
         if hasattr(simulation.mass, "assemble_pattern"):
             connectivity = tables.connectivity
             self.pattern = mass_pattern(grid, connectivity)
@@ -168,14 +167,16 @@ class CompiledTransfer:
             outside = parallel.parallel_p2g(
                 p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, *self._arrays, self.grid_mass,
                 self.grid_absolute, momentum, self._mass_parts, self._absolute_parts, self._momentum_parts)
+        elif pattern is None:
+            outside = self._p2g_sums(
+                p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, self.want_volume, self.hrz,
+                *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum)
         else:
             outside = self._p2g(
-                p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, self.want_volume, pattern is not None,
-                self.hrz, *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum,
-                *(self._no_pattern if pattern is None else (
-                    pattern.indptr, pattern.rank, pattern.complete, pattern.slots, pattern.centre, self._ordered,
-                    pattern.mirror_target, pattern.mirror_source, pattern.data)),
-            )
+                p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, self.want_volume, True, self.hrz,
+                *self._arrays, self.grid_mass, self.grid_absolute, self.grid_volume, momentum,
+                pattern.indptr, pattern.rank, pattern.complete, pattern.slots, pattern.centre, self._ordered,
+                pattern.mirror_target, pattern.mirror_source, pattern.data)
         if outside >= 0:
             self.grid.locate(p.x)  # raises the ValueError naming the points outside
             raise AssertionError(f"point {outside} is outside the grid")  # pragma: no cover

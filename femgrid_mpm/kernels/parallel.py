@@ -14,7 +14,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from .transfer import tensor_g2p, tensor_linear_elastic_stress_and_force, tensor_p2g
+from .transfer import tensor_g2p, tensor_linear_elastic_stress_and_force, tensor_p2g_sums
 
 
 @numba.njit(cache=True, inline="always")
@@ -38,22 +38,17 @@ def _sum_parts(parts, out):
 def parallel_p2g(x, v, mass_p, density_p, v_ref, signed,
                  marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
                  grid_mass, grid_absolute, momentum, mass_parts, absolute_parts, momentum_parts):
-    """:func:`tensor_p2g` (lumped) over chunks of points; returns the first point outside, or -1."""
+    """:func:`tensor_p2g_sums` (lumped) over chunks of points; returns the first point outside, or -1."""
     n_chunks = mass_parts.shape[0]
     n = x.shape[0]
     outside = np.full(n_chunks, -1)
     no_volume = np.zeros(1)
-    no_index = np.zeros(2, np.int32)
-    no_table = np.zeros((1, 1), np.int32)
-    no_flags = np.zeros(1, dtype=np.bool_)
-    no_matrix = np.zeros(1)
-    no_mirror = np.zeros(0, np.int32)
     for chunk in prange(n_chunks):
         start, stop = _bounds(chunk, n_chunks, n)
-        found = tensor_p2g(x[start:stop], v[start:stop], mass_p[start:stop], density_p[start:stop], v_ref, signed,
-                           False, False, False, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
-                           connectivity, mass_parts[chunk], absolute_parts[chunk], no_volume, momentum_parts[chunk],
-                           no_index, no_table, no_flags, no_table, 0, False, no_mirror, no_mirror, no_matrix)
+        found = tensor_p2g_sums(x[start:stop], v[start:stop], mass_p[start:stop], density_p[start:stop], v_ref, signed,
+                                False, False, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                                uniform, connectivity, mass_parts[chunk], absolute_parts[chunk], no_volume,
+                                momentum_parts[chunk])
         if found >= 0:
             outside[chunk] = start + found
     for chunk in range(n_chunks):
