@@ -557,9 +557,17 @@ def _factor(matrix: sp.csr_matrix):
     SuperLU does not warn on a numerically singular matrix; its smallest
     pivot does tell (in symmetric mode the pivots are the diagonal of an
     LDL^T-like factorization, bounded below by the smallest eigenvalue).
+
+    The matrices of the fixed mass pattern store every stencil entry, also
+    the zeros left where empty, fixed or weak nodes were taken out; SuperLU
+    orders and fills by the stored structure, so they are dropped from a
+    copy first (cubic splines, cantilever 8 cells deep, 737 of 2025 nodes
+    active: 2/3 of the entries zero, 85 -> 3.8 ms per factorization).
     """
+    compact = sp.csc_matrix(matrix)  # a copy: the pattern's index arrays stay as they are
+    compact.eliminate_zeros()
     try:
-        factors = spla.splu(matrix.tocsc(), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+        factors = spla.splu(compact, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
     except RuntimeError:  # "Factor is exactly singular"
         return None
     # pivot k against its own diagonal entry: ~1 for an independent node of
