@@ -397,7 +397,15 @@ class ConsistentMass:
         ``p_rel + m v_ref`` and the velocity ``M^-1 p_rel + v_ref``."""
         momentum = relative_momentum + self.lumped[:, None] * frame_velocity
         self._frame = np.asarray(frame_velocity, dtype=float)
-        velocity = self.solve(relative_momentum, "velocity") + frame_velocity
+        # Supports hold the velocity at zero, which is -v_ref in the frame: their
+        # couplings M_fc (-v_ref) belong on the free rows' right-hand side.  Left out,
+        # the free velocities next to a support would depend on v_ref (one point's
+        # velocity), a feedback that no physics has: it made the cantilever with
+        # consistent open-knot splines grow exponentially from the clamp.
+        held = None
+        if self.fixed is not None and np.any(frame_velocity):
+            held = np.where(self.fixed, -self._frame, 0.0)
+        velocity = self.solve(relative_momentum, "velocity", held) + frame_velocity
         if not self._direct:  # the frame of the velocities in the history, for the next guess
             self._previous["frame"] = (self._frame.reshape(1, 2).copy(),)
         return momentum, velocity
@@ -406,25 +414,38 @@ class ConsistentMass:
         """``M @ vector`` with the consistent matrix (empty rows zero)."""
         return self.matrix @ vector
 
-    def solve(self, rhs: np.ndarray, kind: str = "velocity") -> np.ndarray:
-        """Solve ``M x = rhs`` for the two columns of rhs (n_nodes, 2), fixed and
-        empty degrees of freedom held at zero.
+    def solve(self, rhs: np.ndarray, kind: str = "velocity", held: np.ndarray | None = None) -> np.ndarray:
+        """Solve ``M x = rhs`` for the two columns of rhs (n_nodes, 2) on the free
+        degrees of freedom; the solution is zero on the fixed and empty ones.
 
         ``kind`` ("velocity" or "acceleration") keys CG's warm start: the
-        last two solutions of the same kind are extrapolated.
+        last two solutions of the same kind are extrapolated.  ``held``
+        (n_nodes, 2), optional: the values the fixed degrees of freedom have
+        in the system's frame (zero where not fixed); the free rows then
+        solve ``M_ff x_f = rhs_f - M_fc held_c``, the constrained projection.
         """
         solution = np.zeros_like(rhs)
+        coupling = None if held is None else self.matrix @ held
         for system in self._systems:
             part = np.where(system.excluded[:, None], 0.0, rhs[:, system.columns])
-            if not part.any():  # e.g. the relative momentum of a rigid motion
+            coupled = None if coupling is None else np.where(system.excluded[:, None], 0.0, coupling[:, system.columns])
+            if not part.any() and (coupled is None or not coupled.any()):  # e.g. the relative momentum of a rigid motion
                 continue
-            solution[:, system.columns] = self._solve_system(system, part, kind)
+            solution[:, system.columns] = self._solve_system(system, part, kind, coupled)
         if not self._direct:
             self._previous[kind] = (*self._previous.get(kind, ())[-1:], solution)
         return solution
 
-    def _solve_system(self, system: "_System", rhs: np.ndarray, kind: str) -> np.ndarray:
-        solution, converged = self._solve(system, rhs, kind)
+    def _solve_system(self, system: "_System", part: np.ndarray, kind: str, coupled: np.ndarray | None = None) -> np.ndarray:
+        """One system's solve, blended if it is singular and the fallback says so;
+        ``coupled`` is ``M_fc held_c`` on its free rows (blending scales it by
+        ``1 - blend``: the blend's diagonal couples nothing)."""
+        def right_hand_side():
+            if coupled is None:
+                return part
+            return part - ((1.0 - self.blend) if system.blended else 1.0) * coupled
+
+        solution, converged = self._solve(system, right_hand_side(), kind)
         if not converged:
             if self.fallback != "blend":
                 how = "the direct solve left a large residual" if self._direct else "CG did not converge"
@@ -436,7 +457,7 @@ class ConsistentMass:
             if not system.blended:
                 self.blended_steps += 1
             system.blend_with(self._blend_target(), self.blend, self._direct)
-            solution, converged = self._solve(system, rhs, kind)
+            solution, converged = self._solve(system, right_hand_side(), kind)
             if not converged:
                 raise SingularMassError(f"the blended mass matrix could not be solved either ({kind} system)")
         return solution

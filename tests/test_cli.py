@@ -361,7 +361,10 @@ def start_long_run(tmp_path) -> tuple[subprocess.Popen, Path]:
     out = tmp_path / "out"
     argv = [sys.executable, "-m", "femgrid_mpm.cli", "run", str(VIBRATING_BAR), "--out", str(out),
             "--set", "time.end=100", "--set", "output.every=10", "--set", "output.particles=true"]
-    return subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=ENV), out
+    # SIGINT as the default: a test session started in the background (``&``) ignores it,
+    # and a child inherits that, so Python would not install its KeyboardInterrupt handler
+    return subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=ENV,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)), out
 
 
 def wait_for_records(process, out: Path, rows: int, timeout=120.0) -> None:

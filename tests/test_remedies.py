@@ -19,7 +19,7 @@ import pytest
 from femgrid_mpm import cli
 from femgrid_mpm.analysis import bar_axial_period_2d, modal_velocity_probe, zero_crossing_period
 from femgrid_mpm.bases import BASES
-from femgrid_mpm.diagnostics import SimulationStopped
+from femgrid_mpm.diagnostics import EnergyGuard, SimulationStopped
 from femgrid_mpm.mass import positive_weights
 from femgrid_mpm.output import scene_to_toml
 from femgrid_mpm.scene import Scene, bundled_scene
@@ -271,6 +271,19 @@ def test_runaway_energy_stops_the_run_before_nan(output):
     kinetic = 0.5 * np.sum(result.particles.mass[:, None] * result.particles.v**2)
     assert kinetic > 10 * 0.125 or output == "energy"  # the initial total is 0.125 J/m
     assert stop.step <= 3
+
+
+def test_work_taken_out_does_not_raise_the_runaway_bound():
+    """The bound is ``10 (E0 + sum max(W_k, 0) + floor)``, the most that the energy
+    balance ``E = E0 + sum W_k`` allows, times ten.  Damping that a growing mode feeds
+    (here 100 J/m taken out) once raised it with the mode, so the damped cantilever ran
+    away unseen; a load's work put in still raises it."""
+    guard = EnergyGuard(initial=1.0, floor=0.5)
+    assert guard.bound({"damping": -100.0, "point_load": 2.0}) == pytest.approx(10 * (1.0 + 2.0 + 0.5), rel=1e-15)
+    guard.check(34.9, "the kinetic energy", {"damping": -100.0, "point_load": 2.0}, 7, 0.7)  # below: goes on
+    with pytest.raises(SimulationStopped, match=r"step 7 \(t = 0.7 s\): the energy ran away") as stop:
+        guard.check(35.1, "the kinetic energy", {"damping": -100.0, "point_load": 2.0}, 7, 0.7)
+    assert stop.value.reason == "runaway_energy" and "work put in 2" in str(stop.value)
 
 
 def test_runaway_energy_via_the_command_line_exits_3_with_valid_outputs(tmp_path, capsys):
