@@ -609,6 +609,24 @@ def tensor_weights(px, py, constants, marker, factors_x, table_x, factors_y, tab
     return element, fx, dfx, fy, dfy
 
 
+@numba.njit(cache=True, inline="always")
+def located_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y):
+    """:func:`tensor_weights` of a point known to lie in the grid: the passes after
+    P2G, which has located every point of the step and stopped at the first outside
+    (the same arithmetic, so the same cell and factors bit for bit; without the test
+    and its selects the force pass and G2P are ~1-2 ns per point faster)."""
+    lower_x, lower_y, upper_x, upper_y, scale, n_x, n_y, first_x, last_x, first_y, last_y, uniform_x, uniform_y = constants
+    sx = (px - lower_x) * scale
+    sy = (py - lower_y) * scale
+    ix = min(np.int32(sx), np.int32(n_x - 1))
+    iy = min(np.int32(sy), np.int32(n_y - 1))
+    cx = uniform_x if first_x <= ix <= last_x else load_table(factors_x, table_x[ix], marker)
+    cy = uniform_y if first_y <= iy <= last_y else load_table(factors_y, table_y[iy], marker)
+    fx, dfx = factors_1d(sx - ix, cx, scale)
+    fy, dfy = factors_1d(sy - iy, cy, scale)
+    return ix * np.int32(n_y) + iy, fx, dfx, fy, dfy
+
+
 @numba.njit(cache=True)
 def tensor_shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
                                connectivity, order, values, d_x, d_y, nodes):

@@ -41,7 +41,8 @@ import math
 import numba
 import numpy as np
 
-from .basis import function_slots, normalized_squares, point_weights, point_work, tensor_constants, tensor_weights
+from .basis import (function_slots, located_weights, normalized_squares, point_weights, point_work, tensor_constants,
+                    tensor_weights)
 
 
 @numba.njit(cache=True, inline="always")
@@ -542,7 +543,7 @@ def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mas
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
+        element, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
         s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, body, strain, stress, start_motion)
         total += s_xx + s_yy + s_xy
@@ -561,7 +562,7 @@ def tensor_velocity_gradient(x, velocity, v_ref, relative, dt,
     n1 = len(marker)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
+        element, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
         _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, strain_increment, gradient_increment, start_motion)
 
@@ -576,7 +577,7 @@ def tensor_internal_force(x, mass_p, density_p, stress,
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
+        element, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         volume = mass_p[p] / density_p[p]
         total += stress[p, 0] + stress[p, 1] + stress[p, 2]
         _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, volume * stress[p, 0], volume * stress[p, 1],
@@ -592,7 +593,7 @@ def tensor_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
+        element, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
         ax = 0.0
         ay = 0.0
         # what carries the velocity increment: N, or the HRZ weights
