@@ -6,13 +6,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from femgrid_mpm import Grid
 from femgrid_mpm.bases import BASES
 from femgrid_mpm.kernels.basis import separated_tables
 from femgrid_mpm.kernels.pattern import mass_pattern
-from femgrid_mpm.mass import _apply_tensor, _csr_times_dense, _preconditioned_cg, tensor_preconditioner
+from femgrid_mpm.mass import (_apply_tensor, _csr_times_dense, _preconditioned_cg, _symmetric_times_dense_dot,
+                              tensor_preconditioner)
 from femgrid_mpm.solver import Simulation
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
@@ -32,6 +34,33 @@ def test_mass_pattern_is_the_structure_of_the_mass_matrix(basis):
     structure.data[:] = 1.0
     assert (coupled != (structure > 0)).nnz == 0
     np.testing.assert_array_equal(pattern.indices[pattern.diagonal], np.arange(grid.n_nodes))
+
+
+@pytest.mark.parametrize("basis", list(BASES))
+def test_symmetric_product_reads_one_entry_of_each_pair(basis):
+    """In every row of the pattern the entries after the diagonal, with their transposes,
+    are each off-diagonal coupling exactly once; so the product from that half
+    (:func:`_symmetric_times_dense_dot`) is scipy's ``A @ x`` of the assembled,
+    lumped and reduced matrices, to 1e-14 of its scale, for one and two columns."""
+    simulation = Simulation(block_scene(basis, "consistent", 400))
+    simulation.advance()
+    pattern = simulation.transfer.pattern
+    rows = np.repeat(np.arange(len(pattern.indptr) - 1), np.diff(pattern.indptr))
+    after = np.arange(len(pattern.indices)) > pattern.diagonal[rows]
+    upper = set(zip(rows[after].tolist(), pattern.indices[after].tolist()))
+    lower = set(zip(pattern.indices[after].tolist(), rows[after].tolist()))
+    off_diagonal = set(zip(rows.tolist(), pattern.indices.tolist())) - {(i, i) for i in range(len(pattern.indptr) - 1)}
+    assert not upper & lower and upper | lower == off_diagonal
+    rng = np.random.default_rng(3)
+    for matrix in (simulation.mass.matrix, simulation.mass._systems[0].matrix):
+        assert matrix.upper_start is not None
+        for columns in (1, 2):
+            x = rng.normal(size=(matrix.shape[0], columns))
+            expected = sp.csr_matrix(matrix) @ x
+            np.testing.assert_allclose(matrix @ x, expected, rtol=0, atol=1e-14 * np.abs(expected).max())
+            out, dot = np.empty_like(x), np.zeros(columns)
+            _symmetric_times_dense_dot(matrix.indptr, matrix.indices, matrix.data, matrix.upper_start, x, out, dot)
+            np.testing.assert_allclose(dot, np.einsum("ij,ij->j", x, expected), rtol=1e-13)
 
 
 @pytest.mark.parametrize("basis", ["bspline3", "bspline3_open"])
