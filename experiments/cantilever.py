@@ -2,7 +2,7 @@
 
 Usage: ``python experiments/cantilever.py [OUT_DIR]`` (default results/cantilever).
 Spacing 0.5, 0.25 and 0.125 (2, 4 and 8 cells through the depth), every basis,
-lumped and consistent mass: 40 minutes on 2026-12-01, most of it in the
+lumped and consistent mass: 26 minutes on 2026-12-01, most of it in the
 consistent-mass runs of cubic splines at the finest spacing.  ``femgrid-mpm reproduce`` runs spacing 0.5 only.
 """
 
