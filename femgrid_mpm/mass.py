@@ -399,15 +399,7 @@ class ConsistentMass:
         ``p_rel + m v_ref`` and the velocity ``M^-1 p_rel + v_ref``."""
         momentum = relative_momentum + self.lumped[:, None] * frame_velocity
         self._frame = np.asarray(frame_velocity, dtype=float)
-        # Supports hold the velocity at zero, which is -v_ref in the frame: their
-        # couplings M_fc (-v_ref) belong on the free rows' right-hand side.  Left out,
-        # the free velocities next to a support would depend on v_ref (one point's
-        # velocity), a feedback that no physics has: it made the cantilever with
-        # consistent open-knot splines grow exponentially from the clamp.
-        held = None
-        if self.fixed is not None and np.any(frame_velocity):
-            held = np.where(self.fixed, -self._frame, 0.0)
-        velocity = self.solve(relative_momentum, "velocity", held=held) + frame_velocity
+        velocity = self.solve(relative_momentum, "velocity", frame=self._frame) + frame_velocity
         if not self._direct:  # the frame of the velocities in the history, for the next guess
             self._previous["frame"] = (self._frame.reshape(1, 2).copy(),)
         return momentum, velocity
@@ -416,36 +408,54 @@ class ConsistentMass:
         """``M @ vector`` with the consistent matrix (empty rows zero)."""
         return self.matrix @ vector
 
-    def solve(self, rhs: np.ndarray, kind: str = "velocity", held: np.ndarray | None = None) -> np.ndarray:
+    def solve(self, rhs: np.ndarray, kind: str = "velocity", frame: np.ndarray | None = None) -> np.ndarray:
         """Solve ``M x = rhs`` for the two columns of rhs (n_nodes, 2) on the free
         degrees of freedom; the solution is zero on the fixed and empty ones.
 
         ``kind`` ("velocity" or "acceleration") keys CG's warm start: the
-        last two solutions of the same kind are extrapolated.  ``held``
-        (n_nodes, 2), optional: the values the fixed degrees of freedom have
-        in the system's frame (zero where not fixed); the free rows then
-        solve ``M_ff x_f = rhs_f - M_fc held_c``, the constrained projection.
+        last two solutions of the same kind are extrapolated.
+
+        ``frame`` (2,), optional: rhs is a momentum relative to this velocity,
+        ``p - L v_ref`` (L the row sums), and the solution is the velocity
+        relative to it, equal to the absolute solve minus ``v_ref``.  Two
+        terms make it so.  Supports hold the velocity at zero, which is
+        ``-v_ref`` in the frame, so their couplings ``M_fc v_ref`` belong on
+        the free rows' right-hand side: left out, the free velocities next to
+        a support depended on one point's velocity, a feedback that made the
+        cantilever with consistent open-knot splines grow exponentially from
+        the clamp.  And a blend whose diagonal D is not the row sums (HRZ:
+        q2, serendipity) has ``B 1 != L``, which adds ``blend (L - D) v_ref``.
         """
         solution = np.zeros_like(rhs)
-        coupling = None if held is None else self.matrix @ held
+        moving = frame is not None and bool(np.any(frame))
+        coupling = None  # M_fc v_ref on the free rows
+        if moving and self.fixed is not None:
+            coupling = self.matrix @ np.where(self.fixed, frame, 0.0)
         for system in self._systems:
             part = np.where(system.excluded[:, None], 0.0, rhs[:, system.columns])
             coupled = None if coupling is None else np.where(system.excluded[:, None], 0.0, coupling[:, system.columns])
             if not part.any() and (coupled is None or not coupled.any()):  # e.g. the relative momentum of a rigid motion
                 continue
-            solution[:, system.columns] = self._solve_system(system, part, kind, coupled)
+            solution[:, system.columns] = self._solve_system(system, part, kind, coupled,
+                                                             frame[system.columns] if moving else None)
         if not self._direct:
             self._previous[kind] = (*self._previous.get(kind, ())[-1:], solution)
         return solution
 
-    def _solve_system(self, system: "_System", part: np.ndarray, kind: str, coupled: np.ndarray | None = None) -> np.ndarray:
+    def _solve_system(self, system: "_System", part: np.ndarray, kind: str, coupled: np.ndarray | None = None,
+                      frame: np.ndarray | None = None) -> np.ndarray:
         """One system's solve, blended if it is singular and the fallback says so;
-        ``coupled`` is ``M_fc held_c`` on its free rows (blending scales it by
-        ``1 - blend``: the blend's diagonal couples nothing)."""
+        ``coupled`` is ``M_fc v_ref`` on its free rows (blending scales it by
+        ``1 - blend``: the blend's diagonal couples nothing), ``frame`` v_ref on
+        its columns (see :meth:`solve`)."""
         def right_hand_side():
-            if coupled is None:
-                return part
-            return part - ((1.0 - self.blend) if system.blended else 1.0) * coupled
+            total = part
+            if coupled is not None:
+                total = total + ((1.0 - self.blend) if system.blended else 1.0) * coupled
+            if system.blended and frame is not None:
+                excess = np.where(system.excluded, 0.0, self.lumped - self._blend_target())
+                total = total + self.blend * excess[:, None] * frame[None, :]
+            return total
 
         solution, converged = self._solve(system, right_hand_side(), kind)
         if not converged:

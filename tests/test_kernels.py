@@ -202,8 +202,12 @@ def test_engines_agree_with_conjugate_gradients(basis):
         simulation.mass.linear_solver = "cg"
         simulation.mass.tolerance = 1e-12  # far tighter than the default 1e-6: the engines, not the tolerance, are compared
     # each CG stops at a relative residual of 1e-12, so the two solutions differ by up
-    # to that times the condition number (measured: 7e-10 of the stress for q2 at 1e-12)
-    assert_steps_agree(reference, compiled, steps=4, rtol=1e-8)
+    # to that times the condition number.  q2's partly filled cells make every step fall
+    # back to the blend with the HRZ diagonal D, whose velocity solve carries
+    # blend (L - D) v_ref (the same velocities whatever point the frame follows): a
+    # right-hand side of the size of the absolute momentum, not of the relative one,
+    # so the residual CG leaves is larger (measured: 6.7e-8 of the stress, 7e-10 before)
+    assert_steps_agree(reference, compiled, steps=4, rtol=3e-7 if basis == "q2" else 1e-8)
     assert compiled.mass.iterations > 0
 
 
@@ -247,9 +251,9 @@ def test_the_velocity_guess_advances_the_last_grid_velocity():
         counts = []
         solve = simulation.mass.solve
 
-        def counted(rhs, kind="velocity", held=None, *, simulation=simulation, counts=counts, solve=solve):
+        def counted(rhs, kind="velocity", frame=None, *, simulation=simulation, counts=counts, solve=solve):
             before = simulation.mass.iterations
-            solution = solve(rhs, kind, held=held)
+            solution = solve(rhs, kind, frame=frame)
             if kind == "velocity":
                 counts.append(simulation.mass.iterations - before)
             return solution
