@@ -1,7 +1,8 @@
 """Cost of the explicit step: ns per particle-step, fixed cost, memory, compile time, paper runs.
 
 Run: ``python benchmarks/step.py`` (about 6 minutes; ``--quick`` skips 1e5
-particles and the paper runs; ``--engine scipy`` times the reference).
+particles and the paper runs; ``--engine scipy`` times the reference; ``--threads 2``
+the per-particle table with the threaded kernels).
 
 Each case is a square block of linear elastic material (E = 1e4 Pa,
 nu = 0.3, rho = 1e3 kg/m^3) with 2 x 2 points per cell and the initial
@@ -69,14 +70,16 @@ TARGET_LUMPED = {"q1": 40, "q2": 80, "serendipity": 80, "bspline3": 120}
 REMEDIED = ("q2", "serendipity")
 
 
-def block_scene(basis: str, mass: str, n_points: int, engine: str = "numba") -> Scene:
-    """A square block of about ``n_points`` points (2 x 2 per unit cell)."""
+def block_scene(basis: str, mass: str, n_points: int, engine: str = "numba", threads: int = 1) -> Scene:
+    """A square block of about ``n_points`` points (2 x 2 per unit cell); ``threads``:
+    ``[solver] threads`` (the tensor-product kernels of lumped and HRZ mass)."""
     side = max(1, int(round(np.sqrt(n_points / 4))))
     wave_speed = np.sqrt(1e4 * 0.7 / (1.3 * 0.4) / 1e3)  # plane strain p-wave, E = 1e4, nu = 0.3
     return Scene.model_validate({
         "grid": {"basis": basis, "lower": [0, 0], "upper": [side + 4, side + 4], "spacing": 1.0},
         "time": {"dt": 0.1 / wave_speed, "end": 1e6},
-        "solver": {"mass": mass, "negative_mass": "warn", "consistent_fallback": "blend", "engine": engine},
+        "solver": {"mass": mass, "negative_mass": "warn", "consistent_fallback": "blend", "engine": engine,
+                   "threads": threads},
         "bodies": [{
             "name": "block", "lower": [2, 2], "upper": [side + 2, side + 2], "points_per_cell": 2,
             "velocity": [f"0.01*cos(pi*(x-2)/{side})", "0"],
@@ -120,10 +123,10 @@ def fastest(cases: dict, budget: float, min_steps: int = 3) -> dict:
     return best
 
 
-def per_particle_table(engine: str, sizes, budget: float) -> dict:
+def per_particle_table(engine: str, sizes, budget: float, threads: int = 1) -> dict:
     results = {}
     for n in sizes:
-        cases = {(basis, mass): warm_up(Simulation(block_scene(basis, mass, n, engine)))
+        cases = {(basis, mass): warm_up(Simulation(block_scene(basis, mass, n, engine, threads)))
                  for basis in BASES for mass in MASSES}
         for (basis, mass), seconds in fastest(cases, budget).items():
             results[basis, mass, n] = 1e9 * seconds / cases[basis, mass].particles.n
@@ -240,12 +243,14 @@ def main(argv=None) -> None:
     parser.add_argument("--engine", default="numba", choices=["numba", "scipy"])
     parser.add_argument("--quick", action="store_true", help="1e3 and 1e4 particles only, no paper runs")
     parser.add_argument("--budget", type=float, default=1.0, help="seconds of timed steps per case (default 1)")
+    parser.add_argument("--threads", type=int, default=1,
+                        help="[solver] threads for the per-particle table (default 1: serial, the targets' setting)")
     args = parser.parse_args(argv)
     sizes = SIZES[:2] if args.quick else SIZES
     warnings.simplefilter("ignore")
 
-    print(f"engine: {args.engine}; {time.strftime('%Y-%m-%d')}; numpy {np.__version__}\n")
-    table = per_particle_table(args.engine, sizes, args.budget)
+    print(f"engine: {args.engine}; threads: {args.threads}; {time.strftime('%Y-%m-%d')}; numpy {np.__version__}\n")
+    table = per_particle_table(args.engine, sizes, args.budget, args.threads)
     print("ns per particle-step (median over steps):\n")
     print("| basis | mass | " + " | ".join(f"{n:.0e}" for n in sizes) + " | consistent / lumped | target at 1e5 |")
     print("|---|---|" + "---|" * (len(sizes) + 2))

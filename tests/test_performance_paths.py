@@ -194,11 +194,12 @@ def test_benchmark_scene_is_the_intended_block():
 
 
 @pytest.mark.filterwarnings("ignore::femgrid_mpm.diagnostics.NegativeMassWarning")
+@pytest.mark.parametrize("mass", ["lumped", "hrz"])
 @pytest.mark.parametrize("basis", ["q1", "q2", "bspline3"])
-def test_threaded_kernels_agree_with_serial_ones(basis):
+def test_threaded_kernels_agree_with_serial_ones(basis, mass):
     """solver.threads = 2: the chunked kernels give the serial results to rounding."""
-    serial = Simulation(block_scene(basis, "lumped", 1000))
-    threaded = Simulation(block_scene(basis, "lumped", 1000).with_overrides(**{"solver.threads": 2}))
+    serial = Simulation(block_scene(basis, mass, 1000))
+    threaded = Simulation(block_scene(basis, mass, 1000).with_overrides(**{"solver.threads": 2}))
     assert threaded.transfer.threads == 2
     for _ in range(5):
         serial.advance()

@@ -141,7 +141,7 @@ class CompiledTransfer:
         if self.threads > 1:
             numba.set_num_threads(self.threads)
             self._mass_parts = np.zeros((self.threads, n_nodes))
-            self._absolute_parts = np.zeros((self.threads, n_nodes if self.signed else 1))
+            self._absolute_parts = np.zeros((self.threads, n_nodes if self.signed or self.hrz else 1))
             self._momentum_parts = np.zeros((self.threads, n_nodes, 2))
             self._force_parts = np.zeros((self.threads, n_nodes, 2))
             self._relative_parts = np.zeros((self.threads, n_nodes, 2))
@@ -163,9 +163,9 @@ class CompiledTransfer:
             return ctx.transfer_weights.T @ (p.mass[:, None] * (p.v - ctx.frame_velocity))
         momentum = np.empty(self._grid_shape)
         pattern = self.pattern
-        if self.threads > 1 and pattern is None and not self.want_volume and not self.hrz:
+        if self.threads > 1 and pattern is None and not self.want_volume:
             outside = parallel.parallel_p2g(
-                p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, *self._arrays, self.grid_mass,
+                p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, self.hrz, *self._arrays, self.grid_mass,
                 self.grid_absolute, momentum, self._mass_parts, self._absolute_parts, self._momentum_parts)
         elif pattern is None:
             outside = self._p2g_sums(
@@ -222,9 +222,9 @@ class CompiledTransfer:
         # its transfer weights carry the acceleration after
         acceleration = self._no_acceleration if self.from_matrices else ctx.acceleration
         increment = dt * (ctx.transfer_weights @ ctx.acceleration) if self.from_matrices else None
-        if self.threads > 1 and not self.hrz:
+        if self.threads > 1:
             total = parallel.parallel_g2p(p.x, p.v, p.density, acceleration, ctx.frame_velocity,
-                                          dt, self.start_motion, *self._arrays, self.threads)
+                                          dt, self.start_motion, self.hrz, *self._arrays, self.threads)
         else:
             total = self._g2p(p.x, p.v, p.density, acceleration, ctx.frame_velocity, dt,
                               self.start_motion, self.hrz, *self._arrays)

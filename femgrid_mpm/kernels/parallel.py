@@ -5,7 +5,7 @@ chunk runs the serial kernel of :mod:`.transfer` on its slice, scattering into
 its own copy of the grid arrays, and the copies are summed in chunk order.
 The result is therefore the same from run to run for a given number of
 threads (not bit for bit the serial one: the grid sums are grouped by chunk).
-Consistent mass and the general (flat) kernels stay serial.
+Lumped and HRZ mass; consistent mass and the general (flat, folded) kernels stay serial.
 """
 
 from __future__ import annotations
@@ -35,10 +35,10 @@ def _sum_parts(parts, out):
 
 
 @numba.njit(cache=True, parallel=True)
-def parallel_p2g(x, v, mass_p, density_p, v_ref, signed,
+def parallel_p2g(x, v, mass_p, density_p, v_ref, signed, hrz,
                  marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
                  grid_mass, grid_absolute, momentum, mass_parts, absolute_parts, momentum_parts):
-    """:func:`tensor_p2g_sums` (lumped) over chunks of points; returns the first point outside, or -1."""
+    """:func:`tensor_p2g_sums` (lumped or HRZ) over chunks of points; returns the first point outside, or -1."""
     n_chunks = mass_parts.shape[0]
     n = x.shape[0]
     outside = np.full(n_chunks, -1)
@@ -46,7 +46,7 @@ def parallel_p2g(x, v, mass_p, density_p, v_ref, signed,
     for chunk in prange(n_chunks):
         start, stop = _bounds(chunk, n_chunks, n)
         found = tensor_p2g_sums(x[start:stop], v[start:stop], mass_p[start:stop], density_p[start:stop], v_ref, signed,
-                                False, False, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
+                                False, hrz, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
                                 uniform, connectivity, mass_parts[chunk], absolute_parts[chunk], no_volume,
                                 momentum_parts[chunk])
         if found >= 0:
@@ -56,7 +56,7 @@ def parallel_p2g(x, v, mass_p, density_p, v_ref, signed,
             return outside[chunk]
     _sum_parts(mass_parts, grid_mass)
     _sum_parts(momentum_parts, momentum)
-    if signed:
+    if signed or hrz:  # |N|.T @ m_p, or the HRZ diagonal
         _sum_parts(absolute_parts, grid_absolute)
     return -1
 
@@ -84,7 +84,7 @@ def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_
 
 
 @numba.njit(cache=True, parallel=True)
-def parallel_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion,
+def parallel_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
                  marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity, n_chunks):
     """:func:`tensor_g2p` over chunks of points (no scatter: nothing to combine but the checksum)."""
     n = x.shape[0]
@@ -92,7 +92,7 @@ def parallel_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion,
     for chunk in prange(n_chunks):
         start, stop = _bounds(chunk, n_chunks, n)
         totals[chunk] = tensor_g2p(x[start:stop], v[start:stop], density_p[start:stop], acceleration, v_ref,
-                                   dt, start_motion[start:stop], False, marker, geometry, n_elements, factors_x, table_x,
+                                   dt, start_motion[start:stop], hrz, marker, geometry, n_elements, factors_x, table_x,
                                    factors_y, table_y, uniform, connectivity)
     total = 0.0
     for chunk in range(n_chunks):
