@@ -165,15 +165,17 @@ class EnergyGuard:
         """``sum max(W_k, 0)``: the energy the declared forces can have put in (J per unit thickness)."""
         return sum(w for w in work.values() if w > 0.0) if work else 0.0
 
-    def check(self, energy: float, what: str, work: dict, step: int, time: float) -> None:
-        """Raise :class:`SimulationStopped` (reason ``runaway_energy``) if ``energy`` is above the bound."""
+    def check(self, energy: float, what: str, work: dict, step: int, time: float, place=None) -> None:
+        """Raise :class:`SimulationStopped` (reason ``runaway_energy``) if ``energy`` is above the bound;
+        ``place()``, if given, says where (computed only then)."""
         bound = self.bound(work)
         if not energy > bound:  # also NaN: the finiteness check names that
             return
+        where = f"; {place()}" if place is not None else ""
         raise SimulationStopped(
             f"step {step} (t = {time:.6g} s): the energy ran away: {what} {energy:.6g} J/m exceeds "
             f"{self.factor:g} x (initial total {self.initial:.6g} + work put in {self.energy_in(work):.6g} + floor "
-            f"{self.floor:.3g}) = {bound:.6g} J/m (a time step above the critical one, or an unstable model)",
+            f"{self.floor:.3g}) = {bound:.6g} J/m (a time step above the critical one, or an unstable model){where}",
             step, time, "runaway_energy",
         )
 

@@ -253,17 +253,36 @@ class Simulation:
         self.step_index += 1
         self.time = self.step_index * dt
         if not np.isfinite(checksum):
-            raise self._stop("the state is no longer finite (NaN or Inf)", "not_finite")
+            raise self._stop(f"the state is no longer finite (NaN or Inf){self._first_not_finite()}", "not_finite")
 
     def _guard_energy(self, recorded: bool) -> None:
         """The runaway-energy guard (:class:`EnergyGuard`) on what is known cheaply:
         the total of this step's energy record, else the points' kinetic energy."""
         guard, ctx = self.energy_guard, self.context
         if recorded and self.energy is not None and self.energy.rows:
-            guard.check(self.energy.rows[-1]["total"], "the total energy", ctx.work, self.step_index, self.time)
+            guard.check(self.energy.rows[-1]["total"], "the total energy", ctx.work, self.step_index, self.time,
+                        self._fastest_point)
         else:
             kinetic = points_kinetic_energy(self.particles.mass, self.particles.v)
-            guard.check(kinetic, "the kinetic energy", ctx.work, self.step_index, self.time)
+            guard.check(kinetic, "the kinetic energy", ctx.work, self.step_index, self.time, self._fastest_point)
+
+    def _describe_point(self, index: int) -> str:
+        p = self.particles
+        x, x0 = p.x[index], p.x0[index]
+        return (f"point {index} of body {self.scene.bodies[p.body[index]].name!r} at ({x[0]:.6g}, {x[1]:.6g}), "
+                f"seeded at ({x0[0]:.6g}, {x0[1]:.6g})")
+
+    def _fastest_point(self) -> str:
+        """Where a runaway stands out: the point of largest kinetic energy (for the stop's message)."""
+        p = self.particles
+        return f"the most kinetic energy at {self._describe_point(int(np.argmax(p.mass * np.sum(p.v**2, axis=1))))}"
+
+    def _first_not_finite(self) -> str:
+        """The first point whose position, velocity or stress is NaN or Inf (for the stop's message)."""
+        p = self.particles
+        bad = ~(np.isfinite(p.x).all(axis=1) & np.isfinite(p.v).all(axis=1) & np.isfinite(p.stress).all(axis=1))
+        found = np.flatnonzero(bad)
+        return f"; first at {self._describe_point(int(found[0]))}" if found.size else ""
 
     def _solve(self, rhs: np.ndarray, kind: str) -> np.ndarray:
         try:

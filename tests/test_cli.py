@@ -204,6 +204,9 @@ def test_stopped_run_exits_3_and_keeps_valid_outputs(tmp_path, capsys, reason):
         assert (negative["steps_with_negative_mass"], negative["first_step"]) == (1, 0)
         assert negative["min_mass_ratio"] < 0
         np.testing.assert_array_equal(final["x"], final["x0"])
+    if reason == "not_finite":  # the place: the first point of the stopped state that is not finite
+        first = int(np.flatnonzero(~(np.isfinite(final["x"]).all(axis=1) & np.isfinite(final["v"]).all(axis=1)))[0])
+        assert f"; first at point {first} of body 'block' at (" in err.splitlines()[-1]
 
 
 # -- effects: only the declared ones run ------------------------------------------------------

@@ -271,6 +271,9 @@ def test_runaway_energy_stops_the_run_before_nan(output):
     kinetic = 0.5 * np.sum(result.particles.mass[:, None] * result.particles.v**2)
     assert kinetic > 10 * 0.125 or output == "energy"  # the initial total is 0.125 J/m
     assert stop.step <= 3
+    # the place: the point of largest kinetic energy in the state the run stopped with
+    fastest = int(np.argmax(result.particles.mass * np.sum(result.particles.v**2, axis=1)))
+    assert f"the most kinetic energy at point {fastest} of body 'bar' at (" in str(stop)
 
 
 def test_work_taken_out_does_not_raise_the_runaway_bound():
