@@ -67,7 +67,14 @@ DIRECT_LIMIT = 5000
 
 
 class SingularMassError(RuntimeError):
-    """The consistent mass matrix could not be solved (singular or nearly)."""
+    """The consistent mass matrix could not be solved (singular or nearly).
+
+    ``node``: where it is weakest, if known (the node of SuperLU's smallest
+    pivot against its diagonal entry, or of CG's largest residual)."""
+
+    def __init__(self, message: str, node: int | None = None):
+        super().__init__(message)
+        self.node = node
 
 
 @dataclass
@@ -464,15 +471,24 @@ class ConsistentMass:
                 raise SingularMassError(
                     f"the consistent mass matrix is singular or nearly so: {how} on the {kind} system "
                     f"(too few points per cell for the basis, or weakly supported nodes); use more points "
-                    f"per cell, lumped mass, or solver.consistent_fallback = 'blend'"
-                )
+                    f"per cell, lumped mass, or solver.consistent_fallback = 'blend'",
+                    self._weakest_node(system, right_hand_side(), solution))
             if not system.blended:
                 self.blended_steps += 1
             system.blend_with(self._blend_target(), self.blend, self._direct)
             solution, converged = self._solve(system, right_hand_side(), kind)
             if not converged:
-                raise SingularMassError(f"the blended mass matrix could not be solved either ({kind} system)")
+                raise SingularMassError(f"the blended mass matrix could not be solved either ({kind} system)",
+                                        self._weakest_node(system, right_hand_side(), solution))
         return solution
+
+    def _weakest_node(self, system: "_System", rhs: np.ndarray, solution: np.ndarray) -> int | None:
+        """Where a failed solve's matrix is weakest (for the stop's message): the node of the
+        smallest pivot against its diagonal entry (direct), or of the largest residual (CG)."""
+        if self._direct:
+            return _smallest_pivot_node(system.matrix)
+        residual = np.linalg.norm(rhs - system.matrix @ solution, axis=1)
+        return int(np.argmax(residual)) if np.all(np.isfinite(residual)) else None
 
     def _solve(self, system: "_System", rhs: np.ndarray, kind: str) -> tuple[np.ndarray, bool]:
         if self._direct:
@@ -582,6 +598,20 @@ class _System:
 #: thick) between 1e-17 and 2e-10 from step to step, so 1e-10 let a few
 #: singular steps through and the run blew up.
 PIVOT_RATIO = 1e-8
+
+
+def _smallest_pivot_node(matrix: sp.csr_matrix) -> int | None:
+    """The node of SuperLU's smallest pivot against its own diagonal entry (see
+    :func:`_factor`), or None if SuperLU finds the matrix exactly singular."""
+    compact = sp.csc_matrix(matrix)
+    compact.eliminate_zeros()
+    try:
+        factors = spla.splu(compact, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+    except RuntimeError:
+        return None
+    order = np.empty_like(factors.perm_c)
+    order[factors.perm_c] = np.arange(len(order))
+    return int(order[np.argmin(np.abs(factors.U.diagonal()) / matrix.diagonal()[order])])
 
 
 def _factor(matrix: sp.csr_matrix):

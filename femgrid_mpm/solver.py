@@ -227,7 +227,7 @@ class Simulation:
         try:  # Eq. 17: v = M^-1 p_rel + v_ref, and the momentum p_rel + m v_ref
             ctx.momentum, ctx.velocity = self.mass.grid_velocity(relative_momentum, ctx.frame_velocity)
         except SingularMassError as error:
-            raise self._stop(str(error), "singular_mass") from None
+            raise self._singular(error) from None
         self._constrain(ctx.velocity)
         return ctx
 
@@ -288,7 +288,15 @@ class Simulation:
         try:
             return self.mass.solve(rhs, kind)
         except SingularMassError as error:
-            raise self._stop(str(error), "singular_mass") from None
+            raise self._singular(error) from None
+
+    def _singular(self, error: SingularMassError) -> SimulationStopped:
+        """The stop for a consistent mass that cannot be solved, with the node where it is weakest."""
+        where = ""
+        if error.node is not None:
+            x, y = self.grid.nodes[error.node]
+            where = f"; weakest at node {error.node} at ({x:.6g}, {y:.6g})"
+        return self._stop(f"{error}{where}", "singular_mass")
 
     def _constrain(self, field_: np.ndarray) -> None:
         self.context.target = field_

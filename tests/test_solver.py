@@ -283,10 +283,19 @@ def rank_deficient_scene(fallback):
     })
 
 
-def test_rank_deficient_consistent_mass_is_detected():
+@pytest.mark.parametrize("solver", ["direct", "cg"])
+def test_rank_deficient_consistent_mass_is_detected(solver):
+    """Stopped at step 0, naming the place: a node whose function the body's points reach
+    (a positive row sum of the mass), its coordinates those of the grid."""
+    import re
+
+    simulation = Simulation(rank_deficient_scene("error").with_overrides(**{"solver.linear_solver": solver}))
     with pytest.raises(SimulationStopped, match=r"step 0 \(t = 0 s\): the consistent mass matrix is singular") as stop:
-        Simulation(rank_deficient_scene("error")).run()
+        simulation.run()
     assert stop.value.reason == "singular_mass"
+    node, x, y = re.search(r"; weakest at node (\d+) at \(([-\d.e]+), ([-\d.e]+)\)$", str(stop.value)).groups()
+    assert simulation.mass.lumped[int(node)] > 0
+    np.testing.assert_allclose(simulation.grid.nodes[int(node)], [float(x), float(y)], rtol=1e-5)
 
 
 def test_rank_deficient_consistent_mass_blends_and_stays_bounded():
