@@ -600,26 +600,16 @@ class _System:
 PIVOT_RATIO = 1e-8
 
 
-def _smallest_pivot_node(matrix: sp.csr_matrix) -> int | None:
-    """The node of SuperLU's smallest pivot against its own diagonal entry (see
-    :func:`_factor`), or None if SuperLU finds the matrix exactly singular."""
-    compact = sp.csc_matrix(matrix)
-    compact.eliminate_zeros()
-    try:
-        factors = spla.splu(compact, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
-    except RuntimeError:
-        return None
-    order = np.empty_like(factors.perm_c)
-    order[factors.perm_c] = np.arange(len(order))
-    return int(order[np.argmin(np.abs(factors.U.diagonal()) / matrix.diagonal()[order])])
-
-
-def _factor(matrix: sp.csr_matrix):
-    """SuperLU factors of a symmetric matrix, or None if it is singular.
+def _pivots(matrix: sp.csr_matrix):
+    """SuperLU factors of a symmetric matrix and each pivot against its own diagonal
+    entry with that pivot's node, ``(factors, ratios, nodes)``; None if SuperLU finds
+    it exactly singular.
 
     SuperLU does not warn on a numerically singular matrix; its smallest
     pivot does tell (in symmetric mode the pivots are the diagonal of an
-    LDL^T-like factorization, bounded below by the smallest eigenvalue).
+    LDL^T-like factorization, bounded below by the smallest eigenvalue):
+    ~1 for an independent node of any mass, ~1e-16 for a node whose function
+    the others reproduce.
 
     The matrices of the fixed mass pattern store every stencil entry, also
     the zeros left where empty, fixed or weak nodes were taken out; SuperLU
@@ -633,13 +623,25 @@ def _factor(matrix: sp.csr_matrix):
         factors = spla.splu(compact, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
     except RuntimeError:  # "Factor is exactly singular"
         return None
-    # pivot k against its own diagonal entry: ~1 for an independent node of
-    # any mass, ~1e-16 for a node whose function the others reproduce
-    order = np.empty_like(factors.perm_c)
-    order[factors.perm_c] = np.arange(len(order))
-    if np.min(np.abs(factors.U.diagonal()) / matrix.diagonal()[order]) < PIVOT_RATIO:
+    nodes = np.empty_like(factors.perm_c)
+    nodes[factors.perm_c] = np.arange(len(nodes))
+    return factors, np.abs(factors.U.diagonal()) / matrix.diagonal()[nodes], nodes
+
+
+def _factor(matrix: sp.csr_matrix):
+    """SuperLU factors of a symmetric matrix, or None if it is singular (a pivot below
+    :data:`PIVOT_RATIO` of its diagonal entry, see :func:`_pivots`)."""
+    pivots = _pivots(matrix)
+    if pivots is None or np.min(pivots[1]) < PIVOT_RATIO:
         return None
-    return factors
+    return pivots[0]
+
+
+def _smallest_pivot_node(matrix: sp.csr_matrix) -> int | None:
+    """The node of the smallest pivot against its diagonal entry (see :func:`_pivots`),
+    or None if SuperLU finds the matrix exactly singular."""
+    pivots = _pivots(matrix)
+    return None if pivots is None else int(pivots[2][np.argmin(pivots[1])])
 
 
 def _direct_solve(factors, matrix: sp.csr_matrix, rhs: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -749,6 +751,18 @@ def _guess(mode, rhs, lumped, tiny, inverse_diagonal, first, second, dt, shift, 
 
 
 @numba.njit(cache=True)
+def _rows_touching(indptr, indices, marked):
+    """The rows of marked nodes and of their neighbours, on a structurally symmetric
+    pattern with every diagonal entry (the neighbours are the marked rows' columns)."""
+    touched = np.zeros(len(indptr) - 1, dtype=np.bool_)
+    for i in range(len(indptr) - 1):
+        if marked[i]:
+            for entry in range(indptr[i], indptr[i + 1]):  # the diagonal too: the row itself
+                touched[indices[entry]] = True
+    return touched
+
+
+@numba.njit(cache=True)
 def _lump_couplings_in_place(indptr, indices, data, diagonal_index, weak):
     """:func:`_lump_couplings` keeping the structure (moved entries become explicit zeros).
 
@@ -757,13 +771,8 @@ def _lump_couplings_in_place(indptr, indices, data, diagonal_index, weak):
     neighbours are the columns of the weak rows.  The other rows are not read
     (a handful of weak nodes among 27,000: 2.5 ms -> ~30 us per step).
     """
-    n = len(indptr) - 1
-    touched = np.zeros(n, dtype=np.bool_)
-    for i in range(n):
-        if weak[i]:
-            for entry in range(indptr[i], indptr[i + 1]):
-                touched[indices[entry]] = True
-    for i in range(n):
+    touched = _rows_touching(indptr, indices, weak)
+    for i in range(len(indptr) - 1):
         if not touched[i]:
             continue
         for entry in range(indptr[i], indptr[i + 1]):
@@ -779,13 +788,8 @@ def _exclude_in_place(indptr, indices, data, diagonal_index, excluded):
 
     As in :func:`_lump_couplings_in_place`, only the rows of excluded nodes and of
     their neighbours change; the others are not read."""
-    n = len(indptr) - 1
-    touched = np.zeros(n, dtype=np.bool_)
-    for i in range(n):
-        if excluded[i]:
-            for entry in range(indptr[i], indptr[i + 1]):  # the diagonal too: the row itself
-                touched[indices[entry]] = True
-    for i in range(n):
+    touched = _rows_touching(indptr, indices, excluded)
+    for i in range(len(indptr) - 1):
         if not touched[i]:
             continue
         for entry in range(indptr[i], indptr[i + 1]):

@@ -583,38 +583,15 @@ def tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y
 
 
 @numba.njit(cache=True, inline="always")
-def tensor_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y):
-    """Element (-1 if outside) and the 1D factors ``(fx, dfx, fy, dfy)`` of one point.
+def located_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y):
+    """Element and the 1D factors ``(fx, dfx, fy, dfy)`` of a point in the grid.
 
     Located as :meth:`Grid.locate` does (same arithmetic, so the same cell and
-    cell coordinates bit for bit); an outside point gets element -1 and the
-    factors of a clamped cell.
+    cell coordinates bit for bit).  The passes after P2G call it directly: P2G
+    has located every point of the step and stopped at the first outside, and
+    without the test and its selects the force pass and G2P are ~1-2 ns per
+    point faster.
     """
-    lower_x, lower_y, upper_x, upper_y, scale, n_x, n_y, first_x, last_x, first_y, last_y, uniform_x, uniform_y = constants
-    inside = px >= lower_x and px <= upper_x and py >= lower_y and py <= upper_y
-    sx = (px - lower_x) * scale
-    sy = (py - lower_y) * scale
-    ix = min(np.int32(sx), np.int32(n_x - 1))
-    iy = min(np.int32(sy), np.int32(n_y - 1))
-    xi = sx - ix
-    eta = sy - iy
-    if not inside:
-        ix = 0
-        iy = 0
-    cx = uniform_x if first_x <= ix <= last_x else load_table(factors_x, table_x[ix], marker)
-    cy = uniform_y if first_y <= iy <= last_y else load_table(factors_y, table_y[iy], marker)
-    fx, dfx = factors_1d(xi, cx, scale)
-    fy, dfy = factors_1d(eta, cy, scale)
-    element = ix * np.int32(n_y) + iy if inside else -1
-    return element, fx, dfx, fy, dfy
-
-
-@numba.njit(cache=True, inline="always")
-def located_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y):
-    """:func:`tensor_weights` of a point known to lie in the grid: the passes after
-    P2G, which has located every point of the step and stopped at the first outside
-    (the same arithmetic, so the same cell and factors bit for bit; without the test
-    and its selects the force pass and G2P are ~1-2 ns per point faster)."""
     lower_x, lower_y, upper_x, upper_y, scale, n_x, n_y, first_x, last_x, first_y, last_y, uniform_x, uniform_y = constants
     sx = (px - lower_x) * scale
     sy = (py - lower_y) * scale
@@ -625,6 +602,18 @@ def located_weights(px, py, constants, marker, factors_x, table_x, factors_y, ta
     fx, dfx = factors_1d(sx - ix, cx, scale)
     fy, dfy = factors_1d(sy - iy, cy, scale)
     return ix * np.int32(n_y) + iy, fx, dfx, fy, dfy
+
+
+@numba.njit(cache=True, inline="always")
+def tensor_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y):
+    """:func:`located_weights` of any point: element -1 if it is outside the grid (or
+    NaN), with the factors of the grid's lower corner (never read)."""
+    lower_x, lower_y, upper_x, upper_y = constants[0], constants[1], constants[2], constants[3]
+    inside = px >= lower_x and px <= upper_x and py >= lower_y and py <= upper_y
+    if not inside:  # a safe cell: NaN or far-away coordinates would index the tables out of bounds
+        px, py = lower_x, lower_y
+    element, fx, dfx, fy, dfy = located_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y)
+    return (element if inside else np.int32(-1)), fx, dfx, fy, dfy
 
 
 @numba.njit(cache=True)
