@@ -110,7 +110,7 @@ class SolverSpec(_Model):
     cg_tolerance: Annotated[float, Field(gt=0, lt=1)] = 1e-6
     #: the step's transfers: compiled kernels, or scipy.sparse (the reference)
     engine: Literal["numba", "scipy"] = "numba"
-    #: numba engine: threads for the tensor-product kernels (1: serial, reproducible bit for bit)
+    #: numba engine: threads for the tensor-product and serendipity kernels (1: serial, reproducible bit for bit)
     threads: Annotated[int, Field(ge=1, le=256)] = 1
 
 

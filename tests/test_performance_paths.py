@@ -194,10 +194,11 @@ def test_benchmark_scene_is_the_intended_block():
 
 
 @pytest.mark.filterwarnings("ignore::femgrid_mpm.diagnostics.NegativeMassWarning")
-@pytest.mark.parametrize("mass", ["lumped", "hrz"])
-@pytest.mark.parametrize("basis", ["q1", "q2", "bspline3"])
+@pytest.mark.parametrize("mass", ["lumped", "hrz", "consistent"])
+@pytest.mark.parametrize("basis", ["q1", "q2", "serendipity", "bspline3"])
 def test_threaded_kernels_agree_with_serial_ones(basis, mass):
-    """solver.threads = 2: the chunked kernels give the serial results to rounding."""
+    """solver.threads = 2: the chunked kernels (tensor and folded) give the serial results to
+    rounding (consistent mass: its force pass and G2P are chunked)."""
     serial = Simulation(block_scene(basis, mass, 1000))
     threaded = Simulation(block_scene(basis, mass, 1000).with_overrides(**{"solver.threads": 2}))
     assert threaded.transfer.threads == 2

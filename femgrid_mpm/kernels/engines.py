@@ -135,9 +135,12 @@ class CompiledTransfer:
             self._ordered = family == "tensor" and _ordered_slots(self.pattern, len(tables.marker))
             self.want_volume = True
             self.grid_volume = np.zeros(n_nodes)
-        # threads: chunked variants of the tensor kernels (lumped P2G, linear elastic stress, G2P)
+        # threads: chunked variants of the tensor and folded kernels (lumped P2G, linear elastic stress,
+        # G2P), whose serial kernel the basis' form picks (None: tensor)
         threads = int(getattr(simulation.scene.solver, "threads", 1))
-        self.threads = min(threads, numba.config.NUMBA_NUM_THREADS) if family == "tensor" else 1
+        self.threads = min(threads, numba.config.NUMBA_NUM_THREADS) if family in ("tensor", "folded") else 1
+        # the threaded kernels' arguments: the tensor ones with no form, the folded ones with their fold
+        self._chunked_arrays = self._arrays[:8] + (None,) + self._arrays[8:] if family == "tensor" else self._arrays
         if self.threads > 1:
             numba.set_num_threads(self.threads)
             self._mass_parts = np.zeros((self.threads, n_nodes))
@@ -165,8 +168,9 @@ class CompiledTransfer:
         pattern = self.pattern
         if self.threads > 1 and pattern is None and not self.want_volume:
             outside = parallel.parallel_p2g(
-                p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, self.hrz, *self._arrays, self.grid_mass,
-                self.grid_absolute, momentum, self._mass_parts, self._absolute_parts, self._momentum_parts)
+                p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, self.hrz, *self._chunked_arrays,
+                self.grid_mass, self.grid_absolute, momentum, self._mass_parts, self._absolute_parts,
+                self._momentum_parts)
         elif pattern is None:
             outside = self._p2g_sums(
                 p.x, p.v, p.mass, p.density, ctx.frame_velocity, self.signed, self.want_volume, self.hrz,
@@ -197,7 +201,8 @@ class CompiledTransfer:
         if self._lame is not None and self.threads > 1:
             self._stress_total = parallel.parallel_stress_and_force(
                 p.x, ctx.velocity, ctx.frame_velocity, self._relative, dt, p.mass, p.density, p.body, self._lame,
-                *self._arrays, p.strain, p.stress, force, self.start_motion, self._force_parts, self._relative_parts,
+                *self._chunked_arrays, p.strain, p.stress, force, self.start_motion, self._force_parts,
+                self._relative_parts,
             )
             return force
         if self._lame is not None:
@@ -224,7 +229,7 @@ class CompiledTransfer:
         increment = dt * (ctx.transfer_weights @ ctx.acceleration) if self.from_matrices else None
         if self.threads > 1:
             total = parallel.parallel_g2p(p.x, p.v, p.density, acceleration, ctx.frame_velocity,
-                                          dt, self.start_motion, self.hrz, *self._arrays, self.threads)
+                                          dt, self.start_motion, self.hrz, *self._chunked_arrays, self.threads)
         else:
             total = self._g2p(p.x, p.v, p.density, acceleration, ctx.frame_velocity, dt,
                               self.start_motion, self.hrz, *self._arrays)

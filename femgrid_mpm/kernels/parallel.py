@@ -1,11 +1,16 @@
-"""Threaded variants of the tensor-product transfer kernels (``[solver] threads > 1``).
+"""Threaded variants of the transfer kernels (``[solver] threads > 1``).
 
 The points are cut into ``n_chunks`` contiguous chunks, one per thread; each
 chunk runs the serial kernel of :mod:`.transfer` on its slice, scattering into
 its own copy of the grid arrays, and the copies are summed in chunk order.
 The result is therefore the same from run to run for a given number of
 threads (not bit for bit the serial one: the grid sums are grouped by chunk).
-Lumped and HRZ mass; consistent mass and the general (flat, folded) kernels stay serial.
+
+``form`` picks the serial kernel at compile time: ``None`` the tensor-product
+ones (q1, q2, cubic splines), a fold (:class:`~.basis.FoldedTables`, a tuple
+of floats) the folded ones (serendipity).  Lumped and HRZ mass; consistent
+mass and the flat kernels (whose form, a tuple of two arrays, a parallel
+region cannot take) stay serial.
 """
 
 from __future__ import annotations
@@ -14,7 +19,92 @@ import numba
 import numpy as np
 from numba import prange
 
-from .transfer import tensor_g2p, tensor_linear_elastic_stress_and_force, tensor_p2g_sums
+from numba.extending import overload
+
+from .transfer import (local_g2p, local_linear_elastic_stress_and_force, local_p2g_sums, tensor_g2p,
+                       tensor_linear_elastic_stress_and_force, tensor_p2g_sums)
+
+
+def _is_tensor(form) -> bool:
+    return isinstance(form, numba.types.NoneType)
+
+
+def _p2g_chunk(x, v, mass_p, density_p, v_ref, signed, hrz, marker, geometry, n_elements, factors_x, table_x,
+               factors_y, table_y, uniform, form, connectivity, grid_mass, grid_absolute, grid_volume,
+               momentum):  # pragma: no cover - replaced by the overload in numba
+    """The serial P2G of one chunk (lumped or HRZ): tensor or folded by ``form``."""
+    raise NotImplementedError("only callable from compiled code")
+
+
+@overload(_p2g_chunk, inline="always")
+def _p2g_chunk_kernel(x, v, mass_p, density_p, v_ref, signed, hrz, marker, geometry, n_elements, factors_x, table_x,
+                      factors_y, table_y, uniform, form, connectivity, grid_mass, grid_absolute, grid_volume, momentum):
+    if _is_tensor(form):
+        def tensor(x, v, mass_p, density_p, v_ref, signed, hrz, marker, geometry, n_elements, factors_x, table_x,
+                   factors_y, table_y, uniform, form, connectivity, grid_mass, grid_absolute, grid_volume, momentum):
+            return tensor_p2g_sums(x, v, mass_p, density_p, v_ref, signed, False, hrz, marker, geometry, n_elements,
+                                   factors_x, table_x, factors_y, table_y, uniform, connectivity, grid_mass,
+                                   grid_absolute, grid_volume, momentum)
+        return tensor
+
+    def folded(x, v, mass_p, density_p, v_ref, signed, hrz, marker, geometry, n_elements, factors_x, table_x,
+               factors_y, table_y, uniform, form, connectivity, grid_mass, grid_absolute, grid_volume, momentum):
+        return local_p2g_sums(x, v, mass_p, density_p, v_ref, signed, False, hrz, marker, geometry, n_elements,
+                              factors_x, table_x, factors_y, table_y, uniform, form, connectivity, grid_mass,
+                              grid_absolute, grid_volume, momentum)
+    return folded
+
+
+def _stress_and_force_chunk(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame, marker, geometry,
+                            n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity, strain,
+                            stress, force, start_motion):  # pragma: no cover - replaced by the overload in numba
+    """The serial linear elastic stress and force pass of one chunk: tensor or folded by ``form``."""
+    raise NotImplementedError("only callable from compiled code")
+
+
+@overload(_stress_and_force_chunk, inline="always")
+def _stress_and_force_chunk_kernel(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame, marker, geometry,
+                                   n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity,
+                                   strain, stress, force, start_motion):
+    if _is_tensor(form):
+        def tensor(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame, marker, geometry, n_elements,
+                   factors_x, table_x, factors_y, table_y, uniform, form, connectivity, strain, stress, force,
+                   start_motion):
+            return tensor_linear_elastic_stress_and_force(
+                x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame, marker, geometry, n_elements,
+                factors_x, table_x, factors_y, table_y, uniform, connectivity, strain, stress, force, start_motion)
+        return tensor
+
+    def folded(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame, marker, geometry, n_elements,
+               factors_x, table_x, factors_y, table_y, uniform, form, connectivity, strain, stress, force,
+               start_motion):
+        return local_linear_elastic_stress_and_force(
+            x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame, marker, geometry, n_elements,
+            factors_x, table_x, factors_y, table_y, uniform, form, connectivity, strain, stress, force, start_motion)
+    return folded
+
+
+def _g2p_chunk(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz, marker, geometry, n_elements, factors_x,
+               table_x, factors_y, table_y, uniform, form, connectivity):  # pragma: no cover - replaced by the overload
+    """The serial G2P of one chunk: tensor or folded by ``form``."""
+    raise NotImplementedError("only callable from compiled code")
+
+
+@overload(_g2p_chunk, inline="always")
+def _g2p_chunk_kernel(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz, marker, geometry, n_elements,
+                      factors_x, table_x, factors_y, table_y, uniform, form, connectivity):
+    if _is_tensor(form):
+        def tensor(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz, marker, geometry, n_elements,
+                   factors_x, table_x, factors_y, table_y, uniform, form, connectivity):
+            return tensor_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz, marker, geometry,
+                              n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity)
+        return tensor
+
+    def folded(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz, marker, geometry, n_elements,
+               factors_x, table_x, factors_y, table_y, uniform, form, connectivity):
+        return local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz, marker, geometry, n_elements,
+                         factors_x, table_x, factors_y, table_y, uniform, form, connectivity)
+    return folded
 
 
 @numba.njit(cache=True, inline="always")
@@ -36,19 +126,19 @@ def _sum_parts(parts, out):
 
 @numba.njit(cache=True, parallel=True)
 def parallel_p2g(x, v, mass_p, density_p, v_ref, signed, hrz,
-                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
+                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity,
                  grid_mass, grid_absolute, momentum, mass_parts, absolute_parts, momentum_parts):
-    """:func:`tensor_p2g_sums` (lumped or HRZ) over chunks of points; returns the first point outside, or -1."""
+    """The lumped or HRZ P2G (:func:`tensor_p2g_sums`, :func:`local_p2g_sums`) over chunks of
+    points; returns the first point outside, or -1."""
     n_chunks = mass_parts.shape[0]
     n = x.shape[0]
     outside = np.full(n_chunks, -1)
     no_volume = np.zeros(1)
     for chunk in prange(n_chunks):
         start, stop = _bounds(chunk, n_chunks, n)
-        found = tensor_p2g_sums(x[start:stop], v[start:stop], mass_p[start:stop], density_p[start:stop], v_ref, signed,
-                                False, hrz, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
-                                uniform, connectivity, mass_parts[chunk], absolute_parts[chunk], no_volume,
-                                momentum_parts[chunk])
+        found = _p2g_chunk(x[start:stop], v[start:stop], mass_p[start:stop], density_p[start:stop], v_ref, signed,
+                           hrz, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
+                           connectivity, mass_parts[chunk], absolute_parts[chunk], no_volume, momentum_parts[chunk])
         if found >= 0:
             outside[chunk] = start + found
     for chunk in range(n_chunks):
@@ -63,18 +153,19 @@ def parallel_p2g(x, v, mass_p, density_p, v_ref, signed, hrz,
 
 @numba.njit(cache=True, parallel=True)
 def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
-                              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
-                              strain, stress, force, start_motion, force_parts, relative_parts):
-    """:func:`tensor_linear_elastic_stress_and_force` over chunks of points."""
+                              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
+                              connectivity, strain, stress, force, start_motion, force_parts, relative_parts):
+    """The linear elastic stress and force pass (:func:`tensor_linear_elastic_stress_and_force`,
+    :func:`local_linear_elastic_stress_and_force`) over chunks of points."""
     n_chunks = force_parts.shape[0]
     n = x.shape[0]
     totals = np.zeros(n_chunks)
     for chunk in prange(n_chunks):
         start, stop = _bounds(chunk, n_chunks, n)
-        totals[chunk] = tensor_linear_elastic_stress_and_force(
+        totals[chunk] = _stress_and_force_chunk(
             x[start:stop], velocity, v_ref, relative_parts[chunk], dt, mass_p[start:stop], density_p[start:stop],
             body[start:stop], lame, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
-            connectivity, strain[start:stop], stress[start:stop], force_parts[chunk], start_motion[start:stop])
+            form, connectivity, strain[start:stop], stress[start:stop], force_parts[chunk], start_motion[start:stop])
     _sum_parts(force_parts, force)
     relative[:] = relative_parts[0]
     total = 0.0
@@ -85,15 +176,17 @@ def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_
 
 @numba.njit(cache=True, parallel=True)
 def parallel_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
-                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity, n_chunks):
-    """:func:`tensor_g2p` over chunks of points (no scatter: nothing to combine but the checksum)."""
+                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity,
+                 n_chunks):
+    """G2P (:func:`tensor_g2p`, :func:`local_g2p`) over chunks of points (no scatter: nothing to
+    combine but the checksum)."""
     n = x.shape[0]
     totals = np.zeros(n_chunks)
     for chunk in prange(n_chunks):
         start, stop = _bounds(chunk, n_chunks, n)
-        totals[chunk] = tensor_g2p(x[start:stop], v[start:stop], density_p[start:stop], acceleration, v_ref,
-                                   dt, start_motion[start:stop], hrz, marker, geometry, n_elements, factors_x, table_x,
-                                   factors_y, table_y, uniform, connectivity)
+        totals[chunk] = _g2p_chunk(x[start:stop], v[start:stop], density_p[start:stop], acceleration, v_ref, dt,
+                                   start_motion[start:stop], hrz, marker, geometry, n_elements, factors_x, table_x,
+                                   factors_y, table_y, uniform, form, connectivity)
     total = 0.0
     for chunk in range(n_chunks):
         total += totals[chunk]
