@@ -32,6 +32,9 @@ from typing import Callable
 import numpy as np
 
 MAX_LENGTH = 1000
+#: deepest nesting of operations (a sum of n terms nests n - 1 deep): the checks and the
+#: evaluation recurse once per level, and Python's stack would end near 500
+MAX_DEPTH = 100
 
 FUNCTIONS: dict[str, Callable] = {
     "sin": np.sin,
@@ -44,7 +47,9 @@ FUNCTIONS: dict[str, Callable] = {
     "min": lambda *args: reduce(np.minimum, args),
     "max": lambda *args: reduce(np.maximum, args),
 }
-CONSTANTS = {"pi": np.pi, "e": np.e}
+#: numpy scalars, like every literal (below): arithmetic on them follows IEEE (1/0 is inf, which
+#: the callers' finiteness checks name) instead of raising Python's ZeroDivisionError
+CONSTANTS = {"pi": np.float64(np.pi), "e": np.float64(np.e)}
 
 _BINARY = {
     ast.Add: operator.add,
@@ -97,6 +102,8 @@ def compile_expression(text: str, variables: tuple[str, ...]) -> Callable[..., n
         tree = ast.parse(text.strip(), mode="eval")
     except SyntaxError as error:
         raise ExpressionError(f"cannot parse expression {text!r}: {error.msg}") from None
+    if _depth(tree.body) > MAX_DEPTH:
+        raise ExpressionError(f"expression nests operations more than {MAX_DEPTH} deep: {_shortened(text)!r}")
     allowed = ", ".join((*variables, *CONSTANTS, *FUNCTIONS))
     evaluate = _Compiler(text, set(variables), allowed).visit(tree.body)
 
@@ -106,8 +113,14 @@ def compile_expression(text: str, variables: tuple[str, ...]) -> Callable[..., n
             raise ExpressionError(f"expression {text!r} needs values for {sorted(missing)}")
         shape = np.shape(next(iter(values.values()))) if values else ()
         with np.errstate(all="ignore"):
-            result = evaluate(values)
-        return np.broadcast_to(np.asarray(result), shape)
+            try:
+                result = evaluate(values)
+            except (ArithmeticError, TypeError) as error:  # e.g. an integer power too large for a float
+                raise ExpressionError(f"cannot evaluate expression {_shortened(text)!r}: {error}") from None
+        result = np.asarray(result)
+        if np.iscomplexobj(result):  # not reachable with real operands; guard anyway
+            raise ExpressionError(f"expression {_shortened(text)!r} has complex values")
+        return np.broadcast_to(result, shape)
 
     expression.text = text  # type: ignore[attr-defined]
     return expression
@@ -133,7 +146,11 @@ class _Compiler:
     def visit_Constant(self, node: ast.Constant) -> Evaluator:
         if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
             raise self.fail(f"the constant {node.value!r}")
-        value = float(node.value)
+        try:
+            value = np.float64(node.value)
+        except OverflowError:
+            raise ExpressionError(f"the constant {_shortened(str(node.value))} is too large for a float "
+                                  f"in expression {_shortened(self.text)!r}") from None
         return lambda values: value
 
     def visit_Name(self, node: ast.Name) -> Evaluator:
@@ -199,6 +216,21 @@ class _Compiler:
         function = FUNCTIONS[name]
         args = [self.visit(arg) for arg in node.args]
         return lambda values: function(*(arg(values) for arg in args))
+
+
+def _depth(node: ast.AST) -> int:
+    """Nesting depth of an expression tree (iterative: a deep tree must not overflow the stack)."""
+    deepest, stack = 0, [(node, 1)]
+    while stack:
+        current, depth = stack.pop()
+        deepest = max(deepest, depth)
+        stack.extend((child, depth + 1) for child in ast.iter_child_nodes(current))
+    return deepest
+
+
+def _shortened(text: str, limit: int = 60) -> str:
+    """``text``, cut to ``limit`` characters for a one-line message."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _describe(node: ast.AST) -> str:

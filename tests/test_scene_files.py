@@ -135,6 +135,11 @@ BAD_SCENES = [
     ("dunder name", replaced('"0.1*cos(pi*x/5)"', '"__builtins__"'), "bodies[0].velocity", "'__builtins__' is not allowed"),
     ("time in a velocity", replaced('"0.1*cos(pi*x/5)"', '"t"'), "bodies[0].velocity", "'t' is not allowed"),
     ("syntax error", replaced('"0.1*cos(pi*x/5)"', '"0.1*"'), "bodies[0].velocity", "cannot parse"),
+    # Python's recursion would end near 500 levels: a 500-term sum is refused, not a RecursionError
+    ("deeply nested", replaced('"0.1*cos(pi*x/5)"', '"' + "x" + "+x" * 499 + '"'), "bodies[0].velocity",
+     "more than 100 deep"),
+    ("constant too large for a float", replaced('"0.1*cos(pi*x/5)"', '"1' + "0" * 400 + '"'), "bodies[0].velocity",
+     "too large for a float"),
     ("unsafe support", appended("[[supports]]\nwhere = \"x.real <= 0\""), "supports[0].where", "attribute access is not allowed"),
     ("string constant", appended("[[supports]]\nwhere = \"'a' < 'b'\""), "supports[0].where", "not allowed"),
     # the file itself
@@ -151,6 +156,14 @@ BAD_BUILDS = [
      "time.dt", "no stable time step"),
     ("NaN initial velocity", replaced('"0.1*cos(pi*x/5)"', '"sqrt(-1 - x)"'), "bodies[0].velocity", "NaN or infinity at 16 point(s)"),
     ("infinite initial velocity", replaced('"0.1*cos(pi*x/5)"', '"1/(x - x)"'), "bodies[0].velocity", "NaN or infinity"),
+    # arithmetic on literals follows IEEE too (it raised ZeroDivisionError and OverflowError)
+    ("division of literals by zero", replaced('"0.1*cos(pi*x/5)"', '"1/0"'), "bodies[0].velocity", "NaN or infinity"),
+    ("remainder of literals by zero", replaced('"0.1*cos(pi*x/5)"', '"max(x, 1 % 0)"'), "bodies[0].velocity",
+     "NaN or infinity"),
+    ("power of literals overflowing", replaced('"0.1*cos(pi*x/5)"', '"10**400"'), "bodies[0].velocity",
+     "NaN or infinity"),
+    ("real power of a negative literal", replaced('"0.1*cos(pi*x/5)"', '"(-1)**0.5"'), "bodies[0].velocity",
+     "NaN or infinity"),
 ]
 
 
