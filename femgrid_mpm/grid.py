@@ -29,6 +29,9 @@ from .expressions import compile_expression
 
 #: Largest grid accepted: refused before anything is allocated.
 MAX_NODES = 100_000_000
+#: lengths (m) the grid takes: its spacing and coordinates lie within [1/MAX_LENGTH, MAX_LENGTH]
+#: in magnitude, so that areas, masses and node counts stay finite floats
+MAX_LENGTH = 1e100
 
 NodeCondition = Union[str, Callable[[np.ndarray, np.ndarray], np.ndarray]]
 
@@ -78,18 +81,22 @@ class Grid:
         builder = BASES[basis]
         lower = _vector("lower", lower)
         upper = _vector("upper", upper)
-        if not (isinstance(spacing, (int, float)) and math.isfinite(spacing) and spacing > 0):
+        if not (isinstance(spacing, (int, float, np.floating, np.integer)) and not isinstance(spacing, bool)
+                and math.isfinite(spacing) and spacing > 0):
             raise ValueError(f"spacing must be a positive finite number, got {spacing!r}")
+        problem = length_problem(lower, upper, spacing)
+        if problem is not None:
+            raise ValueError(f"{problem[0]} {problem[1]}")
         if np.any(upper <= lower):
             raise ValueError(f"upper {upper.tolist()} must exceed lower {lower.tolist()} in both directions")
-        width = spacing * builder.cells_per_element
-        # a tolerance so that 7.0 / 0.5 counts as 14, not 15, under rounding
-        n_elements = tuple(int(max(1, math.ceil(extent / width - 1e-9))) for extent in upper - lower)
-        n_nodes_estimate = (n_elements[0] * builder.cells_per_element + 3) * (n_elements[1] * builder.cells_per_element + 3)
+        n_nodes_estimate = node_count(lower, upper, spacing, builder.cells_per_element)
         if n_nodes_estimate > MAX_NODES:
             raise ValueError(
                 f"the grid would have about {n_nodes_estimate:.3g} nodes, more than the limit of {MAX_NODES:.0e}"
             )
+        width = spacing * builder.cells_per_element
+        # a tolerance so that 7.0 / 0.5 counts as 14, not 15, under rounding
+        n_elements = tuple(int(max(1, math.ceil(extent / width - 1e-9))) for extent in upper - lower)
         self.basis = basis
         self.spacing = float(spacing)
         self.lower = lower
@@ -269,6 +276,28 @@ class Grid:
             sp.csr_matrix((data.ravel(), indices if k == 0 else indices.copy(), indptr if k == 0 else indptr.copy()), shape=shape, copy=False)
             for k, data in enumerate((values, d_xi, d_eta))
         )
+
+
+def length_problem(lower, upper, spacing: float) -> tuple[str, str] | None:
+    """``(argument, message)`` if the spacing or a coordinate lies outside
+    :data:`MAX_LENGTH` (see there), else None."""
+    spacing = float(spacing)
+    if not 1.0 / MAX_LENGTH <= spacing <= MAX_LENGTH:
+        return "spacing", f"{spacing:g} is outside the supported range {1 / MAX_LENGTH:g} to {MAX_LENGTH:g} m"
+    for name, corner in (("lower", lower), ("upper", upper)):
+        values = [float(value) for value in corner]
+        if any(abs(value) > MAX_LENGTH for value in values):
+            return name, f"{values} is outside the supported range of +-{MAX_LENGTH:g} m"
+    return None
+
+
+def node_count(lower, upper, spacing: float, cells_per_element: int) -> float:
+    """About how many nodes a grid over ``[lower, upper]`` has (a float: no integer
+    conversion of a huge count, and infinity where the extent overflows)."""
+    with np.errstate(over="ignore"):
+        extent = np.asarray(upper, dtype=float) - np.asarray(lower, dtype=float)
+        elements = np.maximum(1.0, np.ceil(extent / (spacing * cells_per_element) - 1e-9))
+        return float(np.prod(elements * cells_per_element + 3.0))
 
 
 def _vector(name: str, value) -> np.ndarray:

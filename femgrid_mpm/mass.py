@@ -422,7 +422,9 @@ class ConsistentMass:
             positions, rows, columns, change = self._correction
             data = self._assembled.data.copy()
             data[positions] += change
-            self._full = _CompiledCSR((data, self._assembled.indices, self._assembled.indptr),
+            # its own index arrays: scipy sorts indices in place (e.g. in abs()), which must not
+            # scramble the system's
+            self._full = _CompiledCSR((data, self._assembled.indices.copy(), self._assembled.indptr.copy()),
                                       shape=self._assembled.shape, copy=False)
             self._full.upper_start = self._assembled.upper_start
         return self._full

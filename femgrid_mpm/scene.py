@@ -37,7 +37,7 @@ from pydantic import (
 from .bases import BASES
 from .effects import Contact, Gravity, MassDamping, PointLoad, Support
 from .expressions import compile_expression
-from .grid import MAX_NODES
+from .grid import MAX_NODES, length_problem, node_count
 from .particles import count_rectangle
 
 #: Largest number of material points accepted, checked before allocating.
@@ -199,9 +199,11 @@ class Scene(_Model):
             if isinstance(load, PointLoad) and load.body not in names:
                 raise ValueError(f"loads[{index}].body: there is no body named {load.body!r} (bodies: {', '.join(names)})")
         grid = self.grid
+        problem = length_problem(grid.lower, grid.upper, grid.spacing)
+        if problem is not None:
+            raise ValueError(f"grid.{problem[0]}: {problem[1]}")
         # Sizes are counted arithmetically, before anything is allocated.
-        width = grid.spacing * BASES[grid.basis].cells_per_element
-        nodes = math.prod(math.ceil((u - l) / width) * BASES[grid.basis].cells_per_element + 3 for l, u in zip(grid.lower, grid.upper))
+        nodes = node_count(grid.lower, grid.upper, grid.spacing, BASES[grid.basis].cells_per_element)
         if nodes > MAX_NODES:
             raise ValueError(
                 f"grid.spacing: {grid.spacing:g} over [{list(grid.lower)}, {list(grid.upper)}] would make about "

@@ -210,6 +210,11 @@ def test_nodes_where():
     (dict(spacing=float("nan")), "spacing must be a positive"),
     (dict(upper=(0.0, 1.0)), "must exceed lower"),
     (dict(spacing=1e-5), "more than the limit"),
+    (dict(spacing=True), "spacing must be a positive"),
+    # node counts and areas must stay finite floats (these raised OverflowError)
+    (dict(spacing=1e-300), "outside the supported range"),
+    (dict(spacing=1e300), "outside the supported range"),
+    (dict(lower=(-1e308, 0.0)), "lower .* outside the supported range"),
 ])
 def test_bad_grid_arguments(kwargs, message):
     arguments = dict(basis="q1", lower=(0.0, 0.0), upper=(1.0, 1.0), spacing=0.5) | kwargs

@@ -63,6 +63,10 @@ BAD_SCENES = [
     ("unknown table", appended("[boundary]\nwhere = 'x <= 0'"), "boundary", "unknown key"),
     # wrong types
     ("string for a number", replaced("spacing = 0.5", "spacing = \"half\""), "grid.spacing", "must be a number"),
+    # these raised OverflowError while counting the nodes
+    ("vanishing spacing", replaced("spacing = 0.5", "spacing = 1e-300"), "grid.spacing", "outside the supported range"),
+    ("huge spacing", replaced("spacing = 0.5", "spacing = 1e300"), "grid.spacing", "outside the supported range"),
+    ("huge extent", replaced("upper = [4.0, 3.0]", "upper = [1e308, 3.0]"), "grid.upper", "outside the supported range"),
     ("numeric string for a number", replaced("spacing = 0.5", "spacing = \"0.5\""), "grid.spacing", "must be a number"),
     ("boolean for a number", replaced("end = 0.05", "end = true"), "time.end", "must be a number"),
     ("fraction for a count", replaced("points_per_cell = 2", "points_per_cell = 2.5"), "bodies[0].points_per_cell", "whole number"),
