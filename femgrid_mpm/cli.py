@@ -88,6 +88,17 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _output_directory(text: str) -> Path:
+    """``--out`` as a path; raises :class:`BadInput` for an empty one (an unset
+    ``$OUT`` would mean the working directory) or one that is a file."""
+    if not text.strip():
+        raise BadInput("--out: is empty (give a directory, e.g. --out results)")
+    out = Path(text)
+    if out.exists() and not out.is_dir():
+        raise BadInput(f"--out {out}: exists and is not a directory")
+    return out
+
+
 def _positive_steps(text: str) -> int:
     try:
         value = int(text)
@@ -173,6 +184,10 @@ def _build(scene, path, observers):
 
     from .solver import Simulation
 
+    need, available = _memory_need(scene), _available_memory()
+    if available is not None and need > available:
+        raise BadInput(f"{path}: the scene needs at least {need / 1e9:.3g} GB of memory, more than the "
+                       f"{available / 1e9:.3g} GB this machine has available")
     try:
         simulation = Simulation(scene, observers=observers)
     except MemoryError:
@@ -192,6 +207,48 @@ def _build(scene, path, observers):
     return simulation
 
 
+#: the least memory a run takes per point and per node (bytes): measured peaks are
+#: 317-887 B per point (benchmarks/step.py); a scene needing more than the machine has
+#: would be killed by the system mid-allocation, with no message
+BYTES_PER_POINT, BYTES_PER_NODE = 300, 100
+
+
+def _memory_need(scene) -> float:
+    """A lower bound of the bytes a run of ``scene`` needs (counted, nothing allocated)."""
+    from .bases import BASES
+    from .grid import node_count
+    from .particles import count_rectangle
+
+    points = sum(count_rectangle(body.lower, body.upper, scene.grid.spacing, body.points_per_cell)
+                 for body in scene.bodies)
+    nodes = node_count(scene.grid.lower, scene.grid.upper, scene.grid.spacing,
+                       BASES[scene.grid.basis].cells_per_element)
+    return BYTES_PER_POINT * points + BYTES_PER_NODE * nodes
+
+
+def _available_memory() -> float | None:
+    """Bytes the system can give without swapping (Linux ``MemAvailable``), or None if unknown."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _critical_dt(simulation) -> float | None:
+    """The estimated critical time step, or None (with a warning) if estimating it needs
+    more memory than there is."""
+    try:
+        return simulation.critical_dt
+    except MemoryError:
+        warnings.warn("the critical time step could not be estimated: not enough memory for its eigenvalue problem",
+                      RuntimeWarning)
+        return None
+
+
 def _key_of_build_error(scene, message: str) -> str:
     """``"KEY: "`` for the errors building a simulation is known to raise, else ``""``.
 
@@ -207,7 +264,9 @@ def _key_of_build_error(scene, message: str) -> str:
 
 
 def _warn_time_step(simulation) -> None:
-    dt, critical = simulation.dt, simulation.critical_dt
+    dt, critical = simulation.dt, _critical_dt(simulation)
+    if critical is None:
+        return
     if critical <= 0:
         warnings.warn(
             f"{simulation.scene.grid.basis} with {simulation.scene.solver.mass} mass has no stable time step "
@@ -244,7 +303,8 @@ def _info(args) -> int:
         "nodes": str(simulation.grid.n_nodes),
         "effects": ", ".join(["internal_force (always)", *simulation.active_effects]),
         "dt": f"{simulation.dt:.6g} s" + (" (auto)" if scene.time.dt == "auto" else ""),
-        "critical_dt": f"{simulation.critical_dt:.6g} s (estimated)",
+        "critical_dt": "not estimated (not enough memory)" if (critical := _critical_dt(simulation)) is None
+        else f"{critical:.6g} s (estimated)",
         "steps": f"{simulation.n_steps} to t = {scene.time.end:g} s",
         "records": f"every {simulation.every} steps" if simulation.every else "none (no [output])",
     }
@@ -263,9 +323,7 @@ def _run(args) -> int:
     from .output import RunOutputs
 
     scene, overrides = _load(args)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise BadInput(f"--out {out}: exists and is not a directory")
+    out = _output_directory(args.out)
     outputs = RunOutputs(out, scene, source=args.scene, overrides=overrides, checkpoint_every=args.checkpoint_every)
     simulation = _build(scene, args.scene, outputs.observers)
     try:
@@ -303,6 +361,12 @@ def _resume(args) -> int:
         raise BadInput(f"{scene_path}: cannot be read: {error.strerror or error}") from None
     if digest != values.get("scene_sha256"):
         raise BadInput(f"{scene_path}: is not the scene of {directory / CHECKPOINT_FILE} (changed since it was written)")
+    status = _run_status(directory)
+    if status is not None and status.get("status") in ("completed", "stopped"):
+        # it would end the same way (same scene, same state), after cutting the finished outputs
+        # back to the checkpoint: an interrupt on the way would leave less than there is now
+        raise BadInput(f"{directory}: the run {status['status']} at step {status.get('steps', '?')}; nothing to "
+                       f"resume (to run it again: femgrid-mpm run {scene_path} --out DIR)")
     try:
         outputs = RunOutputs.resumed(directory, scene, values["outputs"])
     except (KeyError, TypeError, ValueError) as error:
@@ -320,6 +384,19 @@ def _resume(args) -> int:
     except OSError as error:
         raise BadInput(f"{directory}: cannot write there: {error.strerror or error}") from None
     return _execute(simulation, outputs, progress_bar=not args.no_progress)
+
+
+def _run_status(directory: Path) -> dict | None:
+    """The run's ``summary.json``, or None if there is none that reads."""
+    import json
+
+    from .output import SUMMARY_FILE
+
+    try:
+        summary = json.loads((directory / SUMMARY_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    return summary if isinstance(summary, dict) else None
 
 
 def _execute(simulation, outputs, progress_bar: bool) -> int:
@@ -348,18 +425,29 @@ def _execute(simulation, outputs, progress_bar: bool) -> int:
                 bar.close()
         outputs.finish(result)
     except SimulationStopped as stop:
-        outputs.finish(stop.result, stop)
+        try:
+            outputs.finish(stop.result, stop)
+        except OSError as error:
+            return _write_failed(out, error, f"after {stop}")
         _say("stopped", f"{stop}; the outputs so far are in {out}")
         return EXIT_STOPPED
     except KeyboardInterrupt:
-        outputs.finish(simulation.result("interrupted", f"interrupted at step {simulation.step_index} (t = {simulation.time:.6g} s)"))
-        _say("interrupted", f"at step {simulation.step_index} (t = {simulation.time:.6g} s); the outputs so far are in {out}")
+        where = f"at step {simulation.step_index} (t = {simulation.time:.6g} s)"
+        try:
+            outputs.finish(simulation.result("interrupted", f"interrupted {where}"))
+        except OSError as error:
+            return _write_failed(out, error, f"after an interrupt {where}")
+        _say("interrupted", f"{where}; the outputs so far are in {out}")
         return EXIT_INTERRUPTED
     except OSError as error:
-        _say("error", f"cannot write the outputs in {out}: {error}")
-        return EXIT_WRITE_FAILED
+        return _write_failed(out, error)
     print(f"{result.message}: {simulation.step_index} steps in {simulation.wall_time:.3g} s; outputs in {out}")
     return EXIT_DONE
+
+
+def _write_failed(out: Path, error: OSError, when: str = "") -> int:
+    _say("error", f"cannot write the outputs in {out}{' ' + when if when else ''}: {error}")
+    return EXIT_WRITE_FAILED
 
 
 def _progress_bar(simulation, enabled: bool):
@@ -397,14 +485,18 @@ def _progress_bar(simulation, enabled: bool):
 
 def _reproduce(args) -> int:
     """Run the paper's cases (:data:`femgrid_mpm.reproduce.CASES`) into ``--out``."""
+    from .output import probe_writable
     from .reproduce import CASES
 
     unknown = [name for name in args.case if name not in CASES]
     if unknown:
         raise BadInput(f"--case {unknown[0]}: no such case (cases: {', '.join(CASES)})")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise BadInput(f"--out {out}: exists and is not a directory")
+    out = _output_directory(args.out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe_writable(out)
+    except OSError as error:
+        raise BadInput(f"--out {out}: cannot write there: {error.strerror or error}") from None
     warnings.simplefilter("ignore")  # expected events (negative masses under "warn") are in the tables
     for name, run in CASES.items():
         if args.case and name not in args.case:

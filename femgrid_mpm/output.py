@@ -48,6 +48,7 @@ import json
 import math
 import os
 import re
+import tempfile
 import time as clock
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -91,6 +92,12 @@ def atomic_path(path: Path) -> Iterator[Path]:
         with contextlib.suppress(FileNotFoundError):
             temporary.unlink()
         raise
+
+
+def probe_writable(directory: Path) -> None:
+    """Raise OSError unless a file can be created (and removed) in ``directory``."""
+    with tempfile.NamedTemporaryFile(dir=directory, prefix=".femgrid-probe-"):
+        pass
 
 
 def atomic_write(path: Path, data: str | bytes) -> None:
@@ -318,9 +325,27 @@ def _toml_key(key: str) -> str:
 
 
 def _toml_string(text: str) -> str:
-    # JSON string escapes are valid TOML basic-string escapes; DEL is the one
-    # control character JSON leaves alone and TOML does not
-    return json.dumps(text).replace("\x7f", "\\u007f")
+    """A TOML basic string: quotes, backslashes and control characters escaped, every
+    other character as itself (an escaped astral character would be a surrogate pair,
+    which TOML refuses); a lone surrogate, which no TOML string can hold, becomes U+FFFD."""
+    return '"' + "".join(_toml_character(c) for c in text) + '"'
+
+
+def _toml_character(c: str) -> str:
+    if c in '"\\':
+        return "\\" + c
+    code = ord(c)
+    if code < 0x20 or code == 0x7F:
+        return f"\\u{code:04x}"
+    if 0xD800 <= code <= 0xDFFF:
+        return "\ufffd"
+    return c
+
+
+def _toml_comment(text: str) -> str:
+    """``text`` fit for a TOML comment: no control character but tab (they are
+    written as ``\\uXXXX``), no lone surrogate."""
+    return "".join(c if c == "\t" else (_toml_character(c) if c not in '"\\' else c) for c in text)
 
 
 def _toml_value(value) -> str:
@@ -349,7 +374,7 @@ def scene_to_toml(scene, header: str = "") -> str:
     Every key is written, defaults included.  ``header`` becomes comment lines.
     """
     data = scene.model_dump(mode="json", exclude_none=True)
-    lines = [f"# {line}".rstrip() for line in header.splitlines()]
+    lines = [f"# {_toml_comment(line)}".rstrip() for line in header.split("\n")]
 
     def is_table_array(value) -> bool:
         return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
@@ -420,7 +445,11 @@ class RunOutputs:
         self.simulation = simulation
         directory = self.directory
         directory.mkdir(parents=True, exist_ok=True)
-        # the scene first: if the directory is not writable, nothing is removed
+        # every place this run writes or removes in must take a file before anything is
+        # written or removed: a failure then leaves an earlier run's outputs whole
+        series = directory / SERIES_DIRECTORY
+        for place in (directory, series) if series.is_dir() else (directory,):
+            probe_writable(place)
         if source_bytes is None and self.source is not None:
             source_bytes = self.source.read_bytes()
         if source_bytes is not None:
@@ -435,7 +464,6 @@ class RunOutputs:
         # files than records, an energy.csv of another scene): remove ours only.
         for name in (ENERGY_FILE, FINAL_FILE, SERIES_FILE, CHECKPOINT_FILE):
             (directory / name).unlink(missing_ok=True)
-        series = directory / SERIES_DIRECTORY
         if series.is_dir():
             for stale in series.iterdir():
                 if SERIES_PATTERN.match(stale.name):

@@ -212,16 +212,25 @@ def test_same_scene_twice_gives_the_same_bytes(tmp_path):
         assert runs[0][name] == runs[1][name], name
 
 
-def test_resume_of_a_finished_run_repeats_its_end(tmp_path, capsys):
-    """The last checkpoint stays after the end: resuming recomputes the tail
-    and rewrites the same outputs (a stopped run stops again, the same way)."""
+@pytest.mark.parametrize("ending", ["completed", "stopped"])
+def test_resume_of_a_finished_run_is_refused_and_keeps_its_outputs(tmp_path, capsys, ending):
+    """The last checkpoint stays after the end, but resuming a completed (or stopped)
+    run would only end the same way, after cutting its outputs back to the checkpoint:
+    an interrupt on the way then lost the finished results.  It is refused in one line
+    (exit 2) and every file keeps its bytes."""
     out = tmp_path / "out"
-    assert cli.main(bar_argv(out, "--set", "time.end=1", "--checkpoint-every", "100")) == cli.EXIT_DONE
-    before = output_bytes(out)
-    assert cli.main(["resume", str(out)]) == cli.EXIT_DONE
-    assert output_bytes(out) == before
+    # at 10 m/s the bar leaves its grid after a few dozen steps, past the first checkpoints
+    extra = ["--set", "bodies.0.velocity=['10', '0']"] if ending == "stopped" else []
+    code = cli.main(bar_argv(out, "--set", "time.end=1", "--checkpoint-every", "10", *extra))
+    assert code == (cli.EXIT_DONE if ending == "completed" else cli.EXIT_STOPPED)
     summary = json.loads((out / "summary.json").read_text())
-    assert "checkpoint.npz" in summary["files"]
+    assert summary["status"] == ending and "checkpoint.npz" in summary["files"]
+    before = output_bytes(out)
+    capsys.readouterr()
+    assert cli.main(["resume", str(out)]) == cli.EXIT_BAD_INPUT
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"femgrid-mpm: error: {out}: the run {ending} at step ") and "nothing to resume" in line
+    assert output_bytes(out) == before
 
 
 def run_cli(argv, capsys):
@@ -245,6 +254,8 @@ def test_resume_refuses_bad_checkpoints_in_one_line(tmp_path, capsys, damage, wo
     assert cli.main(bar_argv(out, "--set", "time.end=0.5", "--checkpoint-every", "50")) == cli.EXIT_DONE
     capsys.readouterr()
     checkpoint, scene_file = out / CHECKPOINT_FILE, out / "scene.toml"
+    summary_file = out / "summary.json"  # as a killed run leaves it: resumable
+    summary_file.write_text(json.dumps({**json.loads(summary_file.read_text()), "status": "running"}))
     if damage == "missing directory":
         out = tmp_path / "nowhere"
     elif damage == "no checkpoint":

@@ -477,6 +477,10 @@ def test_energy_csv_rows_reach_the_file(tmp_path, flush_seconds):
         (["run", "{scene}", "--out", "{scene}/sub"], "cannot write there"),
         (["info", "{tmp}/missing.toml"], "no such scene file"),
         (["reproduce", "--case", "nope"], "--case nope: no such case"),
+        # an unset $OUT: it would have meant the working directory
+        (["run", "{scene}", "--out", ""], "--out: is empty"),
+        (["reproduce", "--out", " "], "--out: is empty"),
+        (["reproduce", "--out", "{scene}/sub"], "cannot write there"),
     ],
 )
 def test_bad_arguments_are_one_line_exit_2(tmp_path, capsys, argv, words):
@@ -583,3 +587,84 @@ def test_readme_scene_example_is_a_valid_scene_with_every_effect(tmp_path, capsy
     assert code == 0 and err == ""
     effects = info_lines(stdout)["effects"].split(", ")
     assert sorted(effects) == sorted(["internal_force (always)", "energy", "particles", "gravity", "point_load", "damping", "supports"])
+
+
+# -- what must not escape as a traceback or cost an earlier run's outputs ---------------------
+
+
+def test_write_failure_after_a_stop_is_one_line_exit_1(tmp_path, capsys, monkeypatch):
+    """A full disk while a stopped run writes its last files: exit code 1 and one line
+    naming the directory and the stop (it was a 54-line traceback)."""
+    import femgrid_mpm.output as output
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(output, "write_final_state", full_disk)
+    body = {**block().bodies[0].model_dump(mode="json"), "velocity": [10.0, 0.0]}  # leaves the grid at step 24
+    scene = block(bodies=[body], time={"dt": 0.01, "end": 0.5})
+    out = tmp_path / "out"
+    code, _, err = run_cli(["run", write_scene(tmp_path, scene), "--out", out], capsys)
+    assert code == cli.EXIT_WRITE_FAILED
+    (line,) = err.splitlines()
+    assert line.startswith(f"femgrid-mpm: error: cannot write the outputs in {out} after step 24 ")
+    assert "No space left on device" in line
+
+
+def test_failed_start_removes_nothing_of_an_earlier_run(tmp_path, capsys, monkeypatch):
+    """A second run into a directory whose particle series cannot be written: exit 2 and
+    every file of the first run keeps its bytes (its energy.csv, final.npz and series
+    were removed before the failure showed)."""
+    import femgrid_mpm.output as output
+
+    out = tmp_path / "out"
+    scene_path = write_scene(tmp_path, block(output={"every": 5, "particles": True}))
+    assert run_cli(["run", scene_path, "--out", out], capsys)[0] == cli.EXIT_DONE
+    before = {path: path.read_bytes() for path in sorted(out.rglob("*")) if path.is_file()}
+    assert out / "energy.csv" in before and out / "final.npz" in before and len(before) > 6
+    probe = output.probe_writable
+
+    def read_only_series(directory):
+        if Path(directory).name == "particles":
+            raise PermissionError(13, "Permission denied")
+        probe(directory)
+
+    monkeypatch.setattr(output, "probe_writable", read_only_series)
+    code, _, err = run_cli(["run", scene_path, "--out", out, "--set", "time.end=0.1"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    (line,) = err.splitlines()
+    assert line == f"femgrid-mpm: error: --out {out}: cannot write there: Permission denied"
+    assert {path: path.read_bytes() for path in sorted(out.rglob("*")) if path.is_file()} == before
+
+
+def test_scene_larger_than_the_memory_is_refused_before_allocating(tmp_path, capsys, monkeypatch):
+    """A scene whose points and nodes alone need more than the machine has available
+    is refused in one line (the system would kill the run mid-allocation, with no
+    message); the bound is 300 B per point and 100 B per node (measured: 317-887 B)."""
+    # 16 points; nodes as the size check counts them, cells + 3 per direction: 11 x 9 = 99
+    need = 300 * 16 + 100 * 99
+    monkeypatch.setattr(cli, "_available_memory", lambda: need + 1.0)
+    path = write_scene(tmp_path, block())
+    assert run_cli(["info", path], capsys)[0] == cli.EXIT_DONE
+    monkeypatch.setattr(cli, "_available_memory", lambda: 10_000.0)
+    code, _, err = run_cli(["info", path], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    (line,) = err.splitlines()
+    assert line == (f"femgrid-mpm: error: {path}: the scene needs at least {need / 1e9:.3g} GB of memory, "
+                    "more than the 1e-05 GB this machine has available")
+
+
+def test_critical_step_without_memory_is_a_warning(tmp_path, capsys, monkeypatch):
+    """The critical time step's eigenvalue problem running out of memory: ``info`` says
+    it was not estimated and warns in one line (it was a MemoryError traceback)."""
+    from femgrid_mpm.solver import Simulation as Simulated
+
+    def no_memory(self):
+        raise MemoryError
+
+    monkeypatch.setattr(Simulated, "critical_dt", property(no_memory))
+    code, stdout, err = run_cli(["info", write_scene(tmp_path, block())], capsys)
+    assert code == cli.EXIT_DONE
+    assert "critical_dt: not estimated (not enough memory)" in " ".join(stdout.split())
+    (line,) = err.splitlines()
+    assert line.startswith("femgrid-mpm: warning: the critical time step could not be estimated")

@@ -293,7 +293,8 @@ def full_scene() -> Scene:
     """A scene that declares every table and kind of entry."""
     return Scene.model_validate(
         {
-            "title": 'Everything "quoted" \\ once',
+            # an astral character (JSON escapes it as a surrogate pair, which TOML refuses) and a control one
+            "title": 'Everything "quoted" \\ once, 😀 \x01 and \x7f',
             "grid": {"basis": "q2", "lower": [-1, 0], "upper": [4, 3], "spacing": 0.25},
             "time": {"dt": "auto", "end": 0.5, "safety": 0.4},
             "solver": {"mass": "consistent", "negative_mass": "warn", "consistent_fallback": "blend", "blend": 0.2},
@@ -317,8 +318,9 @@ def full_scene() -> Scene:
 
 @pytest.mark.parametrize("scene", [full_scene(), bundled_scene("vibrating_bar")], ids=["full", "vibrating_bar"])
 def test_scene_written_as_toml_loads_back_equal(tmp_path, scene):
-    text = scene_to_toml(scene, header="a header\nof two lines")
-    assert text.startswith("# a header\n# of two lines\n")
+    # the header names the scene file, whose name may hold anything a path can
+    text = scene_to_toml(scene, header="a header\nof two lines\nfrom /tmp/a\x1b\rb😀.toml")
+    assert text.startswith("# a header\n# of two lines\n# from /tmp/a\\u001b\\u000db😀.toml\n")
     assert Scene.model_validate(tomllib.loads(text)) == scene
     path = tmp_path / "scene.toml"
     path.write_text(text)
