@@ -565,6 +565,7 @@ class RunOutputs:
         names += [ENERGY_FILE] if self.energy is not None else []
         names += [SERIES_FILE] if self.observers else []
         names += [FINAL_FILE] if result.status != "running" else []
-        names += [CHECKPOINT_FILE] if self.checkpoint_every else []
+        # a checkpoint is written every N steps: a run shorter than N has none
+        names += [CHECKPOINT_FILE] if self.checkpoint_every and (self.directory / CHECKPOINT_FILE).exists() else []
         summary["files"] = sorted(names)
         return summary

@@ -42,6 +42,8 @@ from .particles import count_rectangle
 
 #: Largest number of material points accepted, checked before allocating.
 MAX_POINTS = 100_000_000
+#: a run of more steps is a mistake (dt in the wrong unit): at ~10 us a step, 1e9 take three hours
+MAX_STEPS = 1_000_000_000
 
 Pair = tuple[float, float]
 
@@ -228,6 +230,13 @@ class Scene(_Model):
                 compile_expression(support.where, ("x", "y"))
             except ValueError as error:
                 raise ValueError(f"supports[{index}].where: {error}") from None
+        if isinstance(self.time.dt, float) and self.time.end / self.time.dt > MAX_STEPS:
+            raise ValueError(f"time.dt: {self.time.dt:g} s to t = {self.time.end:g} s would be "
+                             f"{self.time.end / self.time.dt:.3g} steps, more than the limit of {MAX_STEPS:.0e}")
+        if self.contact is not None and self.contact.kind == "shared" and (self.contact.friction or self.contact.gap):
+            which = "friction" if self.contact.friction else "gap"
+            raise ValueError(f"contact.{which}: applies to kind = 'frictional' only (one shared field has no "
+                             "surfaces between the bodies)")
         if self.contact is not None and self.contact.kind == "frictional" and self.solver.mass != "lumped":
             raise ValueError("contact.kind: 'frictional' contact needs solver.mass = \"lumped\" (one lumped field per body)")
         if self.solver.negative_mass == "threshold" and self.solver.mass == "lumped":
@@ -246,18 +255,15 @@ class Scene(_Model):
 
         Keys are paths into the scene file, list items by index:
         ``scene.with_overrides(**{"grid.basis": "q2", "bodies.0.points_per_cell": 4})``.
+
+        Raises
+        ------
+        SceneError
+            One line naming the key, as for a scene file (a wrong type included).
         """
         data = self.model_dump(mode="json", exclude_none=True)
-        for dotted, value in changes.items():
-            *parents, key = dotted.split(".")
-            target = data
-            for parent in parents:
-                target = target[int(parent)] if isinstance(target, list) else target.setdefault(parent, {})
-            if isinstance(target, list):
-                target[int(key)] = value
-            else:
-                target[key] = value
-        return Scene.model_validate(data)
+        source = "with " + ", ".join(f"{key} = {_shown(value)}" for key, value in changes.items())
+        return _validated(data, changes, source)
 
 
 class SceneError(ValueError):
@@ -286,8 +292,6 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
     import tomllib
     from pathlib import Path
 
-    from pydantic import ValidationError
-
     path = Path(path)
     try:
         with path.open("rb") as handle:
@@ -302,12 +306,23 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
         raise SceneError(_one_line(f"{path}: cannot be read: {error}")) from None
     source = str(path)
     if overrides:
+        if not isinstance(overrides, dict):
+            raise SceneError(f"{source}: overrides must be a dict of dotted keys and values, "
+                             f"got {type(overrides).__name__}")
         source += " (with " + ", ".join(f"{key} = {_shown(value)}" for key, value in overrides.items()) + ")"
-        for dotted, value in overrides.items():
-            try:
-                _assign(data, dotted, value)
-            except (KeyError, IndexError, TypeError, ValueError):
-                raise SceneError(f"{source}: {dotted}: no such key to set") from None
+    return _validated(data, overrides or {}, source)
+
+
+def _validated(data: dict, overrides: dict, source: str) -> "Scene":
+    """The scene of ``data`` (a scene file's tables) with ``overrides`` (dotted keys) set,
+    checked; raises :class:`SceneError` with one line starting with ``source``."""
+    from pydantic import ValidationError
+
+    for dotted, value in overrides.items():
+        try:
+            _assign(data, dotted, _plain(value))
+        except (KeyError, IndexError, TypeError, ValueError):
+            raise SceneError(f"{source}: {dotted}: no such key to set") from None
     try:
         scene = Scene.model_validate(data)
     except ValidationError as error:
@@ -318,6 +333,17 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
     if problem:
         raise SceneError(_one_line(f"{source}: {problem}"))
     return scene
+
+
+def _plain(value):
+    """numpy scalars (and lists or tuples of them) as the Python numbers TOML would give."""
+    import numpy as np
+
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (list, tuple)):
+        return [_plain(item) for item in value]
+    return value
 
 
 def describe_validation_error(error) -> str:
@@ -486,21 +512,30 @@ def _converted_value(raw, validated, location: str) -> str | None:
 
 def _assign(data: dict, dotted: str, value) -> None:
     """Set ``data[a][b][0][c] = value`` for ``dotted = "a.b.0.c"``, creating missing tables."""
+    if not isinstance(dotted, str):
+        raise KeyError(dotted)
     *parents, key = dotted.split(".")
     target = data
     for parent in parents:
         if isinstance(target, list):
-            target = target[int(parent)]
+            target = target[_list_index(parent)]
         elif isinstance(target, dict):
             target = target.setdefault(parent, {})
         else:
             raise KeyError(dotted)
     if isinstance(target, list):
-        target[int(key)] = value
+        target[_list_index(key)] = value
     elif isinstance(target, dict) and key:
         target[key] = value
     else:
         raise KeyError(dotted)
+
+
+def _list_index(text: str) -> int:
+    """A list item's index in a dotted key: digits only (``bodies.-1`` is no key of the file)."""
+    if not text.isdigit():
+        raise KeyError(text)
+    return int(text)
 
 
 def _shown(value) -> str:
@@ -513,7 +548,11 @@ def _shown(value) -> str:
         return json.dumps(value)
     if isinstance(value, float) and not math.isfinite(value):
         return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
-    return repr(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_shown(item) for item in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{key} = {_shown(item)}" for key, item in value.items()) + "}"
+    return repr(value.item() if hasattr(value, "item") and not isinstance(value, (list, dict)) else value)
 
 
 def _one_line(text: str) -> str:

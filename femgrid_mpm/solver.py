@@ -131,6 +131,11 @@ class Simulation:
                     v[:, axis] = compile_expression(component, ("x", "y"))(x=x[:, 0], y=x[:, 1])
                 else:
                     v[:, axis] = component
+            bad = ~np.isfinite(v).all(axis=1)
+            if bad.any():  # an expression that is NaN or infinite somewhere in the body
+                first = int(np.argmax(bad))
+                raise ValueError(f"bodies[{index}].velocity: gives NaN or infinity at {int(bad.sum())} point(s), "
+                                 f"the first at ({x[first, 0]:g}, {x[first, 1]:g})")
             parts.append(
                 Particles(
                     x=x,

@@ -668,3 +668,14 @@ def test_critical_step_without_memory_is_a_warning(tmp_path, capsys, monkeypatch
     assert "critical_dt: not estimated (not enough memory)" in " ".join(stdout.split())
     (line,) = err.splitlines()
     assert line.startswith("femgrid-mpm: warning: the critical time step could not be estimated")
+
+
+def test_summary_lists_a_checkpoint_only_when_one_was_written(tmp_path, capsys):
+    """``--checkpoint-every`` longer than the run (20 steps) writes none, and the summary
+    does not list one (it did)."""
+    path = write_scene(tmp_path, block())
+    for every, written in ((1000, False), (10, True)):
+        out = tmp_path / f"every_{every}"
+        assert run_cli(["run", path, "--out", out, "--checkpoint-every", every], capsys)[0] == cli.EXIT_DONE
+        listed = "checkpoint.npz" in json.loads((out / "summary.json").read_text())["files"]
+        assert listed == written == (out / "checkpoint.npz").exists()

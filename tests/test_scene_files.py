@@ -63,6 +63,9 @@ BAD_SCENES = [
     ("unknown table", appended("[boundary]\nwhere = 'x <= 0'"), "boundary", "unknown key"),
     # wrong types
     ("string for a number", replaced("spacing = 0.5", "spacing = \"half\""), "grid.spacing", "must be a number"),
+    ("steps beyond the limit", replaced("dt = 0.01", "dt = 1e-300"), "time.dt", "5e+298 steps, more than the limit"),
+    ("friction of a shared field", appended("[contact]\nkind = \"shared\"\nfriction = 0.3"), "contact.friction",
+     "applies to kind = 'frictional' only"),
     # these raised OverflowError while counting the nodes
     ("vanishing spacing", replaced("spacing = 0.5", "spacing = 1e-300"), "grid.spacing", "outside the supported range"),
     ("huge spacing", replaced("spacing = 0.5", "spacing = 1e300"), "grid.spacing", "outside the supported range"),
@@ -346,3 +349,39 @@ def test_bundled_scenes_pass_info_with_a_stable_time_step(path, capsys):
     code, stdout, err = run_cli(["info", path], capsys)
     assert code == 0 and err == ""
     assert load_scene(path).title in stdout
+
+
+@pytest.mark.parametrize("changes, words", [
+    ({"grid.spaceing": 1.0}, "grid.spaceing: unknown key (did you mean 'spacing'?)"),
+    ({"grid.spacing": "0.5"}, 'grid.spacing: must be a number (got "0.5")'),  # a file refuses it; so does the API
+    ({"bodies.0.points_per_cell": True}, "bodies[0].points_per_cell: must be a number (got true)"),
+    ({"bodies.-1.name": "a"}, "bodies.-1.name: no such key to set"),  # no Python negative indexing
+])
+def test_overrides_from_python_are_checked_like_a_file(changes, words):
+    """``Scene.with_overrides`` raises one-line SceneErrors naming the key (it raised
+    pydantic's multi-line ValidationError and took wrong types a file may not hold)."""
+    with pytest.raises(SceneError) as raised:
+        bundled_scene("vibrating_bar").with_overrides(**changes)
+    message = str(raised.value)
+    assert "\n" not in message and words in message
+
+
+def test_overrides_take_numpy_numbers():
+    """numpy scalars are numbers (``np.int64(2)`` was "must be a number")."""
+    scene = bundled_scene("vibrating_bar").with_overrides(**{"bodies.0.points_per_cell": np.int64(2),
+                                                             "time.dt": np.float64(0.001)})
+    assert scene.bodies[0].points_per_cell == 2 and scene.time.dt == 0.001
+    path = Path(__file__).parents[1] / "scenes" / "vibrating_bar.toml"
+    assert load_scene(path, {"bodies.0.points_per_cell": np.int64(4)}).bodies[0].points_per_cell == 4
+    with pytest.raises(SceneError, match="overrides must be a dict"):
+        load_scene(path, [("time.end", 1.0)])
+
+
+def test_simulation_refuses_a_non_finite_initial_velocity():
+    """Through the Python API too (the command line refused it, ``Simulation`` did not)."""
+    from femgrid_mpm.solver import Simulation
+
+    scene = bundled_scene("vibrating_bar").with_overrides(**{"bodies.0.velocity": ["0", "sqrt(2.5 - x)"]})
+    # NaN right of x = 2.5: 15 of the 30 columns of 6 points (3 x 3 per cell of 0.5 m; the bar is 5 x 1 m)
+    with pytest.raises(ValueError, match=r"bodies\[0\]\.velocity: gives NaN or infinity at 90 point\(s\)"):
+        Simulation(scene)
