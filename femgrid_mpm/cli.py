@@ -13,6 +13,7 @@ so far kept.  The library raises; only this module exits.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import warnings
@@ -411,10 +412,12 @@ def _execute(simulation, outputs, progress_bar: bool) -> int:
         finally:
             if bar is not None:
                 bar.close()
-        outputs.finish(result)
+        with _uninterrupted():
+            outputs.finish(result)
     except SimulationStopped as stop:
         try:
-            outputs.finish(stop.result, stop)
+            with _uninterrupted():
+                outputs.finish(stop.result, stop)
         except OSError as error:
             return _write_failed(out, error, f"after {stop}")
         _say("stopped", f"{stop}; the outputs so far are in {out}")
@@ -422,7 +425,8 @@ def _execute(simulation, outputs, progress_bar: bool) -> int:
     except KeyboardInterrupt:
         where = f"at step {simulation.step_index} (t = {simulation.time:.6g} s)"
         try:
-            outputs.finish(simulation.result("interrupted", f"interrupted {where}"))
+            with _uninterrupted():  # a second Ctrl-C must not leave the summary saying "running"
+                outputs.finish(simulation.result("interrupted", f"interrupted {where}"))
         except OSError as error:
             return _write_failed(out, error, f"after an interrupt {where}")
         _say("interrupted", f"{where}; the outputs so far are in {out}")
@@ -431,6 +435,22 @@ def _execute(simulation, outputs, progress_bar: bool) -> int:
         return _write_failed(out, error)
     print(f"{result.message}: {simulation.step_index} steps in {simulation.wall_time:.3g} s; outputs in {out}")
     return EXIT_DONE
+
+
+@contextlib.contextmanager
+def _uninterrupted():
+    """Ctrl-C ignored while the last files are written (in the main thread; elsewhere as is)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _write_failed(out: Path, error: OSError, when: str = "") -> int:

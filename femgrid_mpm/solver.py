@@ -26,7 +26,7 @@ import numpy as np
 
 from .diagnostics import EnergyGuard, NegativeMassMonitor, SimulationStopped, points_kinetic_energy
 from .effects.base import Stage, StepContext
-from .energy import EnergyBookkeeping, kinetic_energy
+from .energy import COLUMNS, EnergyBookkeeping, kinetic_energy
 from .expressions import compile_expression
 from .grid import Grid
 from .fields import FieldLumpedMass, FieldTransfer
@@ -440,6 +440,15 @@ class Simulation:
             np.copyto(current, saved)  # in place: effects and engines may hold the arrays
         if values["dt"] != self.dt:
             raise ValueError(f"dt {values['dt']!r} s, this scene has {self.dt!r} s")
+        if not 0 <= int(values["step"]) <= self.n_steps:
+            raise ValueError(f"step {values['step']!r}, this scene runs steps 0 to {self.n_steps}")
+        if p.n and not 0 <= int(p.body.min()) <= int(p.body.max()) < len(self.scene.bodies):
+            raise ValueError(f"particles.body: indices {int(p.body.min())} to {int(p.body.max())}, "
+                             f"this scene has {len(self.scene.bodies)} bodies")
+        if self.energy is not None:
+            rows = np.asarray(arrays["energy.rows"])
+            if rows.size and (rows.ndim != 2 or rows.shape[1] != len(COLUMNS)):
+                raise ValueError(f"energy.rows: shape {rows.shape}, the energy record has {len(COLUMNS)} columns")
         self.step_index, self.time = int(values["step"]), float(values["time"])
         self.wall_time = float(values["wall_time"])
         self.context.work.clear()

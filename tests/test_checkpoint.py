@@ -248,6 +248,9 @@ def run_cli(argv, capsys):
     ("scene edited", "is not the scene of"),
     ("scene missing", "no such scene file"),
     ("other scene", "does not fit"),
+    # well-formed but edited by hand: refused before any file is rewritten (particles.pvd was cut first)
+    ("energy rows edited", "energy.rows: shape (15, 3), the energy record has 9 columns"),  # records 0-140
+    ("step edited", "step -50, this scene runs steps 0 to 167"),
 ])
 def test_resume_refuses_bad_checkpoints_in_one_line(tmp_path, capsys, damage, words):
     out = tmp_path / "out"
@@ -277,6 +280,14 @@ def test_resume_refuses_bad_checkpoints_in_one_line(tmp_path, capsys, damage, wo
         arrays.update({name: array for name, array in other.state()[0].items() if name.startswith("particles.")})
         values.pop("format")
         write_checkpoint(checkpoint, arrays, values)
+    elif damage == "energy rows edited":
+        arrays, values = read_checkpoint(checkpoint)
+        values.pop("format")
+        write_checkpoint(checkpoint, {**arrays, "energy.rows": arrays["energy.rows"][:, :3]}, values)
+    elif damage == "step edited":
+        arrays, values = read_checkpoint(checkpoint)
+        values.pop("format")
+        write_checkpoint(checkpoint, arrays, {**values, "simulation": {**values["simulation"], "step": -50}})
     before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()} if out.exists() else {}
     code, stdout, err = run_cli(["resume", out], capsys)
     assert code == cli.EXIT_BAD_INPUT and stdout == ""
