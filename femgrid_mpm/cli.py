@@ -113,9 +113,13 @@ def _positive_steps(text: str) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code (see :data:`EXIT_CODES`)."""
     try:
-        args = _parser().parse_args(argv)
-    except SystemExit as exit_:  # --help (0) or a usage error (2, printed as one line)
-        return exit_.code if isinstance(exit_.code, int) else EXIT_BAD_INPUT
+        try:
+            args = _parser().parse_args(argv)
+        except SystemExit as exit_:  # --help (0) or a usage error (2, printed as one line)
+            return exit_.code if isinstance(exit_.code, int) else EXIT_BAD_INPUT
+    except KeyboardInterrupt:  # while the libraries load (about a second)
+        _say("interrupted", "stopped by the user")
+        return EXIT_INTERRUPTED
     handlers = {"run": _run, "resume": _resume, "info": _info, "reproduce": _reproduce}
     with warnings.catch_warnings():
         warnings.showwarning = _show_warning

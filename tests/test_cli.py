@@ -679,3 +679,20 @@ def test_summary_lists_a_checkpoint_only_when_one_was_written(tmp_path, capsys):
         assert run_cli(["run", path, "--out", out, "--checkpoint-every", every], capsys)[0] == cli.EXIT_DONE
         listed = "checkpoint.npz" in json.loads((out / "summary.json").read_text())["files"]
         assert listed == written == (out / "checkpoint.npz").exists()
+
+
+def test_ctrl_c_while_the_libraries_load_is_one_line(capsys, monkeypatch):
+    """Importing the command line loads no numpy, scipy or scikit-fem (a Ctrl-C there
+    printed a traceback from the package's import); they load inside ``main``, where a
+    Ctrl-C is one line and exit code 130."""
+    loaded = subprocess.run([sys.executable, "-c", "import sys, femgrid_mpm.cli; "
+                             "print(sorted(m for m in ('numpy', 'scipy', 'skfem', 'numba') if m in sys.modules))"],
+                            capture_output=True, text=True, env=ENV, timeout=60)
+    assert loaded.stdout.strip() == "[]", loaded.stderr
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "_parser", interrupted)
+    assert cli.main(["info", "scene.toml"]) == cli.EXIT_INTERRUPTED
+    assert capsys.readouterr().err == "femgrid-mpm: interrupted: stopped by the user\n"
