@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import time as clock
+import warnings
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -62,6 +63,19 @@ class RunResult:
     summary: dict = field(default_factory=dict)
 
 
+def _warn_of_overlaps(bodies) -> None:
+    """A warning for each pair of bodies whose rectangles overlap: their points fill the same
+    space, so the mass there is counted twice (allowed: it may be meant)."""
+    for i, first in enumerate(bodies):
+        for second in bodies[i + 1:]:
+            lower = np.maximum(first.lower, second.lower)
+            upper = np.minimum(first.upper, second.upper)
+            if np.all(upper > lower):
+                warnings.warn(f"bodies {first.name!r} and {second.name!r} overlap in [{lower[0]:g}, {lower[1]:g}] to "
+                              f"[{upper[0]:g}, {upper[1]:g}]: their points fill the same space (mass counted twice there)",
+                              RuntimeWarning, stacklevel=3)
+
+
 class Simulation:
     """A scene, built: grid, particles, materials, mass model and bound effects.
 
@@ -80,6 +94,7 @@ class Simulation:
         self.materials = [make_material(body.material) for body in scene.bodies]
         self.particles = self._seed()
         self.body_slices = self.particles.body_slices()
+        _warn_of_overlaps(scene.bodies)
         self.reference_mass = max(m.density for m in self.materials) * spec.spacing**2
         self.mass = self._mass_model()
         self.every = scene.output.every if scene.output else 0

@@ -385,3 +385,21 @@ def test_simulation_refuses_a_non_finite_initial_velocity():
     # NaN right of x = 2.5: 15 of the 30 columns of 6 points (3 x 3 per cell of 0.5 m; the bar is 5 x 1 m)
     with pytest.raises(ValueError, match=r"bodies\[0\]\.velocity: gives NaN or infinity at 90 point\(s\)"):
         Simulation(scene)
+
+
+def test_overlapping_bodies_are_warned_of(tmp_path, capsys):
+    """Two bodies over the same space double its mass: allowed (it may be meant), but a
+    one-line warning names them and the overlap; apart, there is none."""
+    second = '\n[[bodies]]\nname = "other"\nlower = [LOWER, 0.5]\nupper = [3.0, 1.5]\npoints_per_cell = 2\n' \
+             'material = { E = 1.0e4, nu = 0.3, density = 1.0e3 }\n'
+    for lower, warned in (("1.25", True), ("1.75", False)):
+        path = tmp_path / f"scene_{lower}.toml"
+        path.write_text(BASE + second.replace("LOWER", lower))
+        code, _, err = run_cli(["info", path], capsys)
+        assert code == cli.EXIT_DONE
+        lines = [line for line in err.splitlines() if "overlap" in line]
+        if warned:
+            assert lines == ["femgrid-mpm: warning: bodies 'block' and 'other' overlap in [1.25, 0.5] to [1.75, 1.5]: "
+                             "their points fill the same space (mass counted twice there)"]
+        else:
+            assert lines == []
