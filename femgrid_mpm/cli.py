@@ -92,7 +92,7 @@ def _parser() -> argparse.ArgumentParser:
 def _output_directory(text: str) -> Path:
     """``--out`` as a path; raises :class:`BadInput` for an empty one (an unset
     ``$OUT`` would mean the working directory) or one that is a file."""
-    if not text.strip():
+    if not text:  # (a name of spaces is a directory's name like any other)
         raise BadInput("--out: is empty (give a directory, e.g. --out results)")
     out = Path(text)
     if out.exists() and not out.is_dir():

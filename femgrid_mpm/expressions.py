@@ -32,8 +32,9 @@ from typing import Callable
 import numpy as np
 
 MAX_LENGTH = 1000
-#: deepest nesting of operations (a sum of n terms nests n - 1 deep): the checks and the
-#: evaluation recurse once per level, and Python's stack would end near 500
+#: deepest nesting of the expression's syntax tree, operators and leaves counted (a sum of
+#: n terms is n + 1 deep): the checks and the evaluation recurse once per level, and Python's
+#: stack would end near 500
 MAX_DEPTH = 100
 
 FUNCTIONS: dict[str, Callable] = {
@@ -103,7 +104,7 @@ def compile_expression(text: str, variables: tuple[str, ...]) -> Callable[..., n
     except SyntaxError as error:
         raise ExpressionError(f"cannot parse expression {text!r}: {error.msg}") from None
     if _depth(tree.body) > MAX_DEPTH:
-        raise ExpressionError(f"expression nests operations more than {MAX_DEPTH} deep: {_shortened(text)!r}")
+        raise ExpressionError(f"expression nests more than {MAX_DEPTH} deep: {_shortened(text)!r}")
     allowed = ", ".join((*variables, *CONSTANTS, *FUNCTIONS))
     evaluate = _Compiler(text, set(variables), allowed).visit(tree.body)
 

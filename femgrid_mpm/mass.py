@@ -341,8 +341,8 @@ class ConsistentMass:
     def __post_init__(self):
         self._previous: dict[str, tuple] = {}
         self._frame = None  # the frame of the velocity being solved for (set by grid_velocity)
-        # the assembled M (or, made into the solve's system in place, that system R, with
-        # M = R + the recorded changes), and M rebuilt from them on demand (:attr:`matrix`)
+        # the assembled M (or, made into the solve's system in place, that system R and the
+        # entries it overwrote), and M rebuilt from them on demand (:attr:`matrix`)
         self._assembled, self._correction, self._full = None, None, None
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
 
@@ -403,9 +403,11 @@ class ConsistentMass:
         )
         if diagonal_index is not None and len(groups) == 1:
             # the one system is made from the assembled matrix in place (a copy of its data was
-            # ~25 ns per point-step for cubic splines at 1e5 points); M = R + the recorded changes
-            self._correction = _exclude_in_place_recording(matrix.indptr, matrix.indices, matrix.data, diagonal_index,
-                                                           excluded[:, 0])
+            # ~25 ns per point-step for cubic splines at 1e5 points); M is R with the entries the
+            # exclusion overwrote put back
+            self._correction = (*_exclude_in_place_recording(matrix.indptr, matrix.indices, matrix.data,
+                                                             diagonal_index, excluded[:, 0]),
+                                np.ascontiguousarray(excluded[:, 0]))
             self._systems = [_System.build(matrix, [0, 1], excluded[:, 0], self._direct, diagonal_index,
                                            in_place=True)]
         else:
@@ -419,9 +421,9 @@ class ConsistentMass:
         if self._correction is None:
             return self._assembled
         if self._full is None:
-            positions, rows, columns, change = self._correction
+            positions, _, _, old, _ = self._correction
             data = self._assembled.data.copy()
-            data[positions] += change
+            data[positions] = old  # the entries themselves, not a difference: exact at any scale
             # its own index arrays: scipy sorts indices in place (e.g. in abs()), which must not
             # scramble the system's
             self._full = _CompiledCSR((data, self._assembled.indices.copy(), self._assembled.indptr.copy()),
@@ -443,10 +445,10 @@ class ConsistentMass:
         """``M @ vector`` with the consistent matrix (empty rows zero)."""
         if self._correction is None:
             return self._assembled @ vector
-        _, rows, columns, change = self._correction  # R @ vector plus the changes the exclusion made
-        columns_of = np.reshape(vector, (vector.shape[0], -1))
-        product = _add_changes(np.reshape(self._assembled @ columns_of, columns_of.shape), rows, columns, change,
-                               np.ascontiguousarray(columns_of, dtype=float))
+        _, rows, columns, old, excluded = self._correction  # from R @ vector and what the exclusion overwrote
+        columns_of = np.ascontiguousarray(np.reshape(vector, (vector.shape[0], -1)), dtype=float)
+        product = _unexcluded_product(np.reshape(self._assembled @ columns_of, columns_of.shape), excluded, rows,
+                                      columns, old, columns_of)
         return product.reshape(vector.shape)
 
     def solve(self, rhs: np.ndarray, kind: str = "velocity", frame: np.ndarray | None = None) -> np.ndarray:
@@ -841,9 +843,12 @@ def _exclude_in_place(indptr, indices, data, diagonal_index, excluded):
 
 @numba.njit(cache=True)
 def _exclude_in_place_recording(indptr, indices, data, diagonal_index, excluded):
-    """:func:`_exclude_in_place` on ``data`` itself, returning what it changed,
-    ``(positions, rows, columns, old - new)``, so that the matrix before is the one
-    after plus those changes (:attr:`ConsistentMass.matrix`, :meth:`ConsistentMass.apply`)."""
+    """:func:`_exclude_in_place` on ``data`` itself, returning what it overwrote,
+    ``(positions, rows, columns, old)``: every nonzero entry of an excluded row, the
+    diagonal of an excluded row whatever its value, and the nonzero entries of kept rows
+    in excluded columns.  The matrix before is the one after with those entries put
+    back (exactly, :attr:`ConsistentMass.matrix`), and its product is the one after
+    with the excluded rows replaced (:meth:`ConsistentMass.apply`)."""
     touched = _rows_touching(indptr, indices, excluded)
     size = 0
     for i in range(len(indptr) - 1):
@@ -852,7 +857,7 @@ def _exclude_in_place_recording(indptr, indices, data, diagonal_index, excluded)
     positions = np.empty(size, dtype=np.int64)
     rows = np.empty(size, dtype=np.int64)
     columns = np.empty(size, dtype=np.int64)
-    change = np.empty(size)
+    old = np.empty(size)
     count = 0
     for i in range(len(indptr) - 1):
         if not touched[i]:
@@ -860,23 +865,30 @@ def _exclude_in_place_recording(indptr, indices, data, diagonal_index, excluded)
         for entry in range(indptr[i], indptr[i + 1]):
             j = indices[entry]
             if excluded[i] or excluded[j]:
-                new = 1.0 if (excluded[i] and entry == diagonal_index[i]) else 0.0
-                if data[entry] != new:
+                diagonal = excluded[i] and entry == diagonal_index[i]
+                if data[entry] != 0.0 or diagonal:
                     positions[count] = entry
                     rows[count] = i
                     columns[count] = j
-                    change[count] = data[entry] - new
+                    old[count] = data[entry]
                     count += 1
-                    data[entry] = new
-    return positions[:count], rows[:count], columns[:count], change[:count]
+                data[entry] = 1.0 if diagonal else 0.0
+    return positions[:count], rows[:count], columns[:count], old[:count]
 
 
 @numba.njit(cache=True)
-def _add_changes(product, rows, columns, change, vector):
-    """``product += C @ vector`` for the changes ``C`` (COO: rows, columns, values); vector (n, k)."""
+def _unexcluded_product(product, excluded, rows, columns, old, vector):
+    """``M @ vector`` from ``product = R @ vector`` (R: M with the excluded rows and columns
+    made identity) and the entries the exclusion overwrote (:func:`_exclude_in_place_recording`):
+    an excluded row of R is exactly its unit row, so it is cleared and summed afresh; a kept
+    row gains the couplings to excluded columns that R left out.  vector, product (n, k)."""
+    for i in range(product.shape[0]):
+        if excluded[i]:
+            for c in range(product.shape[1]):
+                product[i, c] = 0.0
     for t in range(rows.shape[0]):
         for c in range(vector.shape[1]):
-            product[rows[t], c] += change[t] * vector[columns[t], c]
+            product[rows[t], c] += old[t] * vector[columns[t], c]
     return product
 
 

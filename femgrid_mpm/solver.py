@@ -447,23 +447,26 @@ class Simulation:
             If the state does not fit this simulation (another scene).
         """
         p = self.particles
-        for name in p.__dataclass_fields__:
-            saved = np.asarray(arrays[f"particles.{name}"])
+        # everything is checked before anything is taken back: a refused state leaves this one as it was
+        saved = {name: np.asarray(arrays[f"particles.{name}"]) for name in p.__dataclass_fields__}
+        for name, array in saved.items():
             current = getattr(p, name)
-            if saved.shape != current.shape or saved.dtype != current.dtype:
-                raise ValueError(f"particles.{name}: shape {saved.shape} {saved.dtype}, this scene has {current.shape} {current.dtype}")
-            np.copyto(current, saved)  # in place: effects and engines may hold the arrays
+            if array.shape != current.shape or array.dtype != current.dtype:
+                raise ValueError(f"particles.{name}: shape {array.shape} {array.dtype}, this scene has {current.shape} {current.dtype}")
         if values["dt"] != self.dt:
             raise ValueError(f"dt {values['dt']!r} s, this scene has {self.dt!r} s")
         if not 0 <= int(values["step"]) <= self.n_steps:
             raise ValueError(f"step {values['step']!r}, this scene runs steps 0 to {self.n_steps}")
-        if p.n and not 0 <= int(p.body.min()) <= int(p.body.max()) < len(self.scene.bodies):
-            raise ValueError(f"particles.body: indices {int(p.body.min())} to {int(p.body.max())}, "
+        body = saved["body"]
+        if body.size and not 0 <= int(body.min()) <= int(body.max()) < len(self.scene.bodies):
+            raise ValueError(f"particles.body: indices {int(body.min())} to {int(body.max())}, "
                              f"this scene has {len(self.scene.bodies)} bodies")
         if self.energy is not None:
             rows = np.asarray(arrays["energy.rows"])
             if rows.size and (rows.ndim != 2 or rows.shape[1] != len(COLUMNS)):
                 raise ValueError(f"energy.rows: shape {rows.shape}, the energy record has {len(COLUMNS)} columns")
+        for name, array in saved.items():
+            np.copyto(getattr(p, name), array)  # in place: effects and engines may hold the arrays
         self.step_index, self.time = int(values["step"]), float(values["time"])
         self.wall_time = float(values["wall_time"])
         self.context.work.clear()

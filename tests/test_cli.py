@@ -479,7 +479,7 @@ def test_energy_csv_rows_reach_the_file(tmp_path, flush_seconds):
         (["reproduce", "--case", "nope"], "--case nope: no such case"),
         # an unset $OUT: it would have meant the working directory
         (["run", "{scene}", "--out", ""], "--out: is empty"),
-        (["reproduce", "--out", " "], "--out: is empty"),
+        (["reproduce", "--out", ""], "--out: is empty"),
         (["reproduce", "--out", "{scene}/sub"], "cannot write there"),
     ],
 )

@@ -144,7 +144,7 @@ BAD_SCENES = [
     ("syntax error", replaced('"0.1*cos(pi*x/5)"', '"0.1*"'), "bodies[0].velocity", "cannot parse"),
     # Python's recursion would end near 500 levels: a 500-term sum is refused, not a RecursionError
     ("deeply nested", replaced('"0.1*cos(pi*x/5)"', '"' + "x" + "+x" * 499 + '"'), "bodies[0].velocity",
-     "more than 100 deep"),
+     "nests more than 100 deep"),
     ("constant too large for a float", replaced('"0.1*cos(pi*x/5)"', '"1' + "0" * 400 + '"'), "bodies[0].velocity",
      "too large for a float"),
     ("unsafe support", appended("[[supports]]\nwhere = \"x.real <= 0\""), "supports[0].where", "attribute access is not allowed"),
