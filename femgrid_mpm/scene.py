@@ -200,6 +200,10 @@ class Scene(_Model):
         for index, load in enumerate(self.loads):
             if isinstance(load, PointLoad) and load.body not in names:
                 raise ValueError(f"loads[{index}].body: there is no body named {load.body!r} (bodies: {', '.join(names)})")
+            if isinstance(load, PointLoad) and not all(l <= a <= u for l, a, u in zip(self.grid.lower, load.at, self.grid.upper)):
+                # far away, every point is as near in floating point (at 1e300 the first was taken)
+                raise ValueError(f"loads[{index}].at: {list(load.at)} lies outside the grid "
+                                 f"[{list(self.grid.lower)}, {list(self.grid.upper)}]")
         grid = self.grid
         problem = length_problem(grid.lower, grid.upper, grid.spacing)
         if problem is not None:

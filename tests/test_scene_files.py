@@ -64,6 +64,8 @@ BAD_SCENES = [
     # wrong types
     ("string for a number", replaced("spacing = 0.5", "spacing = \"half\""), "grid.spacing", "must be a number"),
     ("steps beyond the limit", replaced("dt = 0.01", "dt = 1e-300"), "time.dt", "5e+298 steps, more than the limit"),
+    ("point load outside the grid", appended("[[loads]]\nkind = \"point\"\nbody = \"block\"\nat = [1e300, 1e300]\n"
+                                             "force = [1.0, 0.0]"), "loads[0].at", "lies outside the grid"),
     ("friction of a shared field", appended("[contact]\nkind = \"shared\"\nfriction = 0.3"), "contact.friction",
      "applies to kind = 'frictional' only"),
     # these raised OverflowError while counting the nodes

@@ -48,7 +48,8 @@ class PointLoad:
     def bind(self, simulation):
         particles = simulation.particles
         members = np.flatnonzero(particles.body == simulation.body_index(self.body))
-        distance = np.linalg.norm(particles.x[members] - np.asarray(self.at), axis=1)
+        offset = particles.x[members] - np.asarray(self.at)
+        distance = np.hypot(offset[:, 0], offset[:, 1])  # no overflow for a far-away `at` (the norm's squares did)
         point = int(members[np.argmin(distance)])
         force = np.asarray(self.force, dtype=float)
         if self.model == "paper_eq35":
