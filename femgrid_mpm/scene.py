@@ -121,9 +121,11 @@ class Material(_Model):
     ``"neo_hookean"`` (finite strain, plane strain only); see :mod:`femgrid_mpm.materials`."""
 
     model: Literal["linear_elastic", "neo_hookean"] = "linear_elastic"
-    E: PositiveFloat
+    # bounds far beyond any material (steel: 2e11 Pa, 7.8e3 kg/m^3) that keep the moduli,
+    # masses and wave speeds finite floats (E = 1e308 overflowed in the critical step estimate)
+    E: Annotated[float, Field(gt=0, le=1e30)]
     nu: Annotated[float, Field(gt=-1, lt=0.5)]
-    density: PositiveFloat
+    density: Annotated[float, Field(ge=1e-30, le=1e30)]
     plane: Literal["strain", "stress"] = "strain"
 
     @model_validator(mode="after")
@@ -436,6 +438,11 @@ def _message(error: dict) -> str:
         return "must be a table"
     if kind in ("tuple_type", "list_type"):
         return "must be an array"
+    bounds = {"greater_than": "gt", "greater_than_equal": "ge", "less_than": "lt", "less_than_equal": "le"}
+    if kind in bounds and isinstance(context.get(bounds[kind]), float):  # 1e+30, not 30 digits
+        words = {"gt": "greater than", "ge": "greater than or equal to", "lt": "less than",
+                 "le": "less than or equal to"}[bounds[kind]]
+        return f"must be {words} {context[bounds[kind]]:g}"
     message = error["msg"].removeprefix("Value error, ").removeprefix("Assertion failed, ")
     if message.startswith("Input should be "):
         message = "must be " + message.removeprefix("Input should be ")

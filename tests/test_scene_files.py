@@ -63,6 +63,10 @@ BAD_SCENES = [
     ("unknown table", appended("[boundary]\nwhere = 'x <= 0'"), "boundary", "unknown key"),
     # wrong types
     ("string for a number", replaced("spacing = 0.5", "spacing = \"half\""), "grid.spacing", "must be a number"),
+    ("modulus beyond any material", replaced("E = 1.0e4", "E = 1.0e308"), "bodies[0].material.E",
+     "less than or equal to 1e+30"),
+    ("density beyond any material", replaced("density = 1.0e3", "density = 1.0e-300"), "bodies[0].material.density",
+     "greater than or equal to 1e-30"),
     ("steps beyond the limit", replaced("dt = 0.01", "dt = 1e-300"), "time.dt", "5e+298 steps, more than the limit"),
     ("point load outside the grid", appended("[[loads]]\nkind = \"point\"\nbody = \"block\"\nat = [1e300, 1e300]\n"
                                              "force = [1.0, 0.0]"), "loads[0].at", "lies outside the grid"),
@@ -87,7 +91,8 @@ BAD_SCENES = [
     ("E < 0", replaced("E = 1.0e4", "E = -5.0"), "bodies[0].material.E", "greater than 0"),
     ("nu = 0.5", replaced("nu = 0.3", "nu = 0.5"), "bodies[0].material.nu", "less than 0.5"),
     ("nu = -1", replaced("nu = 0.3", "nu = -1.0"), "bodies[0].material.nu", "greater than -1"),
-    ("density = 0", replaced("density = 1.0e3", "density = 0.0"), "bodies[0].material.density", "greater than 0"),
+    ("density = 0", replaced("density = 1.0e3", "density = 0.0"), "bodies[0].material.density",
+     "greater than or equal to 1e-30"),
     ("unknown material model", replaced('model = "linear_elastic"', 'model = "rubber"'), "bodies[0].material.model", "rubber"),
     # grid and bodies
     ("spacing = 0", replaced("spacing = 0.5", "spacing = 0.0"), "grid.spacing", "greater than 0"),
