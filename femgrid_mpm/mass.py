@@ -405,9 +405,8 @@ class ConsistentMass:
             # the one system is made from the assembled matrix in place (a copy of its data was
             # ~25 ns per point-step for cubic splines at 1e5 points); M is R with the entries the
             # exclusion overwrote put back
-            self._correction = (*_exclude_in_place_recording(matrix.indptr, matrix.indices, matrix.data,
-                                                             diagonal_index, excluded[:, 0]),
-                                np.ascontiguousarray(excluded[:, 0]))
+            self._correction = _exclude_in_place(matrix.indptr, matrix.indices, matrix.data, diagonal_index,
+                                                 excluded[:, 0])
             self._systems = [_System.build(matrix, [0, 1], excluded[:, 0], self._direct, diagonal_index,
                                            in_place=True)]
         else:
@@ -421,7 +420,7 @@ class ConsistentMass:
         if self._correction is None:
             return self._assembled
         if self._full is None:
-            positions, _, _, old, _ = self._correction
+            positions, _, old = self._correction
             data = self._assembled.data.copy()
             data[positions] = old  # the entries themselves, not a difference: exact at any scale
             # its own index arrays: scipy sorts indices in place (e.g. in abs()), which must not
@@ -445,10 +444,11 @@ class ConsistentMass:
         """``M @ vector`` with the consistent matrix (empty rows zero)."""
         if self._correction is None:
             return self._assembled @ vector
-        _, rows, columns, old, excluded = self._correction  # from R @ vector and what the exclusion overwrote
+        positions, rows, old = self._correction  # from R @ vector and what the exclusion overwrote
         columns_of = np.ascontiguousarray(np.reshape(vector, (vector.shape[0], -1)), dtype=float)
-        product = _unexcluded_product(np.reshape(self._assembled @ columns_of, columns_of.shape), excluded, rows,
-                                      columns, old, columns_of)
+        product = _unexcluded_product(np.reshape(self._assembled @ columns_of, columns_of.shape),
+                                      self._systems[0].excluded, self._assembled.indices, positions, rows, old,
+                                      columns_of)
         return product.reshape(vector.shape)
 
     def solve(self, rhs: np.ndarray, kind: str = "velocity", frame: np.ndarray | None = None) -> np.ndarray:
@@ -605,16 +605,15 @@ class _System:
     def build(cls, matrix: sp.csr_matrix, columns: list, excluded: np.ndarray, direct: bool,
               diagonal_index: np.ndarray | None = None, in_place: bool = False) -> "_System":
         """``in_place``: ``matrix`` has already been reduced in place (its data is the system's)."""
-        if in_place:
-            reduced = _CompiledCSR((matrix.data, matrix.indices, matrix.indptr), shape=matrix.shape, copy=False)
-            reduced.upper_start = diagonal_index
-            inverse_diagonal = 1.0 / matrix.data[diagonal_index]
-        elif diagonal_index is None:
+        if diagonal_index is None:
             keep = sp.diags((~excluded).astype(float))
             reduced = (keep @ matrix @ keep + sp.diags(excluded.astype(float))).tocsr()
             inverse_diagonal = 1.0 / reduced.diagonal()
         else:  # the same on a structure with every diagonal entry: zero rows and columns, unit diagonal
-            data = _exclude_in_place(matrix.indptr, matrix.indices, matrix.data.copy(), diagonal_index, excluded)
+            data = matrix.data
+            if not in_place:  # on a copy: the other component's system needs the assembled entries too
+                data = data.copy()
+                _exclude_in_place(matrix.indptr, matrix.indices, data, diagonal_index, excluded)
             # the index arrays are shared with the (internal) assembled matrix: nothing sorts them
             reduced = _CompiledCSR((data, matrix.indices, matrix.indptr), shape=matrix.shape, copy=False)
             reduced.upper_start = diagonal_index  # exclusion and lumping keep the symmetry and the order
@@ -825,30 +824,16 @@ def _lump_couplings_in_place(indptr, indices, data, diagonal_index, weak):
 
 @numba.njit(cache=True)
 def _exclude_in_place(indptr, indices, data, diagonal_index, excluded):
-    """``keep M keep + diag(excluded)`` on a structure with every diagonal entry.
+    """``keep M keep + diag(excluded)`` in ``data`` itself, on a structure with every
+    diagonal entry, returning what it overwrote, ``(positions, rows, old)``: every
+    nonzero entry of an excluded row, the diagonal of an excluded row whatever its
+    value, and the nonzero entries of kept rows in excluded columns.  The matrix before
+    is the one after with those entries put back (exactly, :attr:`ConsistentMass.matrix`),
+    and its product is the one after with the excluded rows replaced
+    (:meth:`ConsistentMass.apply`).
 
     As in :func:`_lump_couplings_in_place`, only the rows of excluded nodes and of
     their neighbours change; the others are not read."""
-    touched = _rows_touching(indptr, indices, excluded)
-    for i in range(len(indptr) - 1):
-        if not touched[i]:
-            continue
-        for entry in range(indptr[i], indptr[i + 1]):
-            if excluded[i] or excluded[indices[entry]]:
-                data[entry] = 0.0
-        if excluded[i]:
-            data[diagonal_index[i]] = 1.0
-    return data
-
-
-@numba.njit(cache=True)
-def _exclude_in_place_recording(indptr, indices, data, diagonal_index, excluded):
-    """:func:`_exclude_in_place` on ``data`` itself, returning what it overwrote,
-    ``(positions, rows, columns, old)``: every nonzero entry of an excluded row, the
-    diagonal of an excluded row whatever its value, and the nonzero entries of kept rows
-    in excluded columns.  The matrix before is the one after with those entries put
-    back (exactly, :attr:`ConsistentMass.matrix`), and its product is the one after
-    with the excluded rows replaced (:meth:`ConsistentMass.apply`)."""
     touched = _rows_touching(indptr, indices, excluded)
     size = 0
     for i in range(len(indptr) - 1):
@@ -856,30 +841,27 @@ def _exclude_in_place_recording(indptr, indices, data, diagonal_index, excluded)
             size += indptr[i + 1] - indptr[i]
     positions = np.empty(size, dtype=np.int64)
     rows = np.empty(size, dtype=np.int64)
-    columns = np.empty(size, dtype=np.int64)
     old = np.empty(size)
     count = 0
     for i in range(len(indptr) - 1):
         if not touched[i]:
             continue
         for entry in range(indptr[i], indptr[i + 1]):
-            j = indices[entry]
-            if excluded[i] or excluded[j]:
+            if excluded[i] or excluded[indices[entry]]:
                 diagonal = excluded[i] and entry == diagonal_index[i]
                 if data[entry] != 0.0 or diagonal:
                     positions[count] = entry
                     rows[count] = i
-                    columns[count] = j
                     old[count] = data[entry]
                     count += 1
                 data[entry] = 1.0 if diagonal else 0.0
-    return positions[:count], rows[:count], columns[:count], old[:count]
+    return positions[:count], rows[:count], old[:count]
 
 
 @numba.njit(cache=True)
-def _unexcluded_product(product, excluded, rows, columns, old, vector):
+def _unexcluded_product(product, excluded, indices, positions, rows, old, vector):
     """``M @ vector`` from ``product = R @ vector`` (R: M with the excluded rows and columns
-    made identity) and the entries the exclusion overwrote (:func:`_exclude_in_place_recording`):
+    made identity) and the entries the exclusion overwrote (:func:`_exclude_in_place`):
     an excluded row of R is exactly its unit row, so it is cleared and summed afresh; a kept
     row gains the couplings to excluded columns that R left out.  vector, product (n, k)."""
     for i in range(product.shape[0]):
@@ -887,8 +869,9 @@ def _unexcluded_product(product, excluded, rows, columns, old, vector):
             for c in range(product.shape[1]):
                 product[i, c] = 0.0
     for t in range(rows.shape[0]):
+        j = indices[positions[t]]
         for c in range(vector.shape[1]):
-            product[rows[t], c] += old[t] * vector[columns[t], c]
+            product[rows[t], c] += old[t] * vector[j, c]
     return product
 
 
@@ -927,13 +910,6 @@ def _row_times_dense(indptr, indices, data, x, i):
         b0 += d * x[j, 1]
         entry += 1
     return (a0 + a1) + (a2 + a3), (b0 + b1) + (b2 + b3)
-
-
-@numba.njit(cache=True)
-def _csr_times_dense(indptr, indices, data, x, out):
-    """``out = A @ x`` for x of shape (n, k)."""
-    _csr_times_dense_dot(indptr, indices, data, x, out, np.zeros(x.shape[1]))
-    return out
 
 
 @numba.njit(cache=True, inline="always")

@@ -13,7 +13,7 @@ from femgrid_mpm import Grid
 from femgrid_mpm.bases import BASES
 from femgrid_mpm.kernels.basis import separated_tables
 from femgrid_mpm.kernels.pattern import mass_pattern
-from femgrid_mpm.mass import (_apply_tensor, _csr_times_dense, _preconditioned_cg, _symmetric_times_dense_dot,
+from femgrid_mpm.mass import (_apply_tensor, _preconditioned_cg, _symmetric_times_dense_dot,
                               tensor_preconditioner)
 from femgrid_mpm.solver import Simulation
 
@@ -173,17 +173,6 @@ def test_a_layer_that_is_not_positive_definite_falls_back_to_the_tensor_precondi
     assert converged
     expected = spla.spsolve(system.matrix.tocsc(), rhs)
     np.testing.assert_allclose(solution, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
-
-
-def test_compiled_csr_product():
-    rng = np.random.default_rng(2)
-    import scipy.sparse as sp
-
-    A = sp.random(50, 50, density=0.2, random_state=3, format="csr")
-    for columns in (1, 2):
-        x = rng.random((50, columns))
-        np.testing.assert_allclose(_csr_times_dense(A.indptr, A.indices, A.data, x, np.empty_like(x)), A @ x,
-                                   rtol=1e-14, atol=1e-14)
 
 
 def test_benchmark_scene_is_the_intended_block():
