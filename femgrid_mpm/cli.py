@@ -208,15 +208,8 @@ BYTES_PER_POINT, BYTES_PER_NODE = 300, 100
 
 def _memory_need(scene) -> float:
     """A lower bound of the bytes a run of ``scene`` needs (counted, nothing allocated)."""
-    from .bases import BASES
-    from .grid import node_count
-    from .particles import count_rectangle
-
-    points = sum(count_rectangle(body.lower, body.upper, scene.grid.spacing, body.points_per_cell)
-                 for body in scene.bodies)
-    nodes = node_count(scene.grid.lower, scene.grid.upper, scene.grid.spacing,
-                       BASES[scene.grid.basis].cells_per_element)
-    return BYTES_PER_POINT * points + BYTES_PER_NODE * nodes
+    points = sum(scene.point_count(index) for index in range(len(scene.bodies)))
+    return BYTES_PER_POINT * points + BYTES_PER_NODE * scene.node_count()
 
 
 def _available_memory() -> float | None:

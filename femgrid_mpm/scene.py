@@ -211,7 +211,7 @@ class Scene(_Model):
         if problem is not None:
             raise ValueError(f"grid.{problem[0]}: {problem[1]}")
         # Sizes are counted arithmetically, before anything is allocated.
-        nodes = node_count(grid.lower, grid.upper, grid.spacing, BASES[grid.basis].cells_per_element)
+        nodes = self.node_count()
         if nodes > MAX_NODES:
             raise ValueError(
                 f"grid.spacing: {grid.spacing:g} over [{list(grid.lower)}, {list(grid.upper)}] would make about "
@@ -224,7 +224,7 @@ class Scene(_Model):
                     f"bodies[{index}]: body {body.name!r} [{list(body.lower)}, {list(body.upper)}] lies outside the grid "
                     f"[{list(grid.lower)}, {list(grid.upper)}]"
                 )
-            count = count_rectangle(body.lower, body.upper, grid.spacing, body.points_per_cell)
+            count = self.point_count(index)
             points += count
             if points > MAX_POINTS:
                 raise ValueError(
@@ -255,6 +255,15 @@ class Scene(_Model):
             if self.contact is not None and self.contact.kind == "frictional":
                 raise ValueError("solver.negative_mass: 'threshold' is implemented for one shared field, not for 'frictional' contact")
         return self
+
+    def node_count(self) -> float:
+        """About how many grid nodes the scene makes (counted, nothing allocated)."""
+        return node_count(self.grid.lower, self.grid.upper, self.grid.spacing, BASES[self.grid.basis].cells_per_element)
+
+    def point_count(self, index: int) -> int:
+        """How many points body ``index`` is seeded with (counted, nothing allocated)."""
+        body = self.bodies[index]
+        return count_rectangle(body.lower, body.upper, self.grid.spacing, body.points_per_cell)
 
     def with_overrides(self, **changes) -> "Scene":
         """A copy with dotted keys replaced, validated again.
@@ -563,7 +572,7 @@ def _shown(value) -> str:
         return "[" + ", ".join(_shown(item) for item in value) + "]"
     if isinstance(value, dict):
         return "{" + ", ".join(f"{key} = {_shown(item)}" for key, item in value.items()) + "}"
-    return repr(value.item() if hasattr(value, "item") and not isinstance(value, (list, dict)) else value)
+    return repr(value.item() if hasattr(value, "item") else value)  # numpy scalars as Python numbers
 
 
 def _one_line(text: str) -> str:
