@@ -72,7 +72,7 @@ REMEDIED = ("q2", "serendipity")
 
 def block_scene(basis: str, mass: str, n_points: int, engine: str = "numba", threads: int = 1) -> Scene:
     """A square block of about ``n_points`` points (2 x 2 per unit cell); ``threads``:
-    ``[solver] threads`` (the tensor-product kernels of lumped and HRZ mass)."""
+    ``[solver] threads`` (the transfers of every basis with lumped or HRZ mass)."""
     side = max(1, int(round(np.sqrt(n_points / 4))))
     wave_speed = np.sqrt(1e4 * 0.7 / (1.3 * 0.4) / 1e3)  # plane strain p-wave, E = 1e4, nu = 0.3
     return Scene.model_validate({

@@ -113,15 +113,9 @@ def compile_expression(text: str, variables: tuple[str, ...]) -> Callable[..., n
         if missing:
             raise ExpressionError(f"expression {text!r} needs values for {sorted(missing)}")
         shape = np.shape(next(iter(values.values()))) if values else ()
-        with np.errstate(all="ignore"):
-            try:
-                result = evaluate(values)
-            except (ArithmeticError, TypeError) as error:  # e.g. an integer power too large for a float
-                raise ExpressionError(f"cannot evaluate expression {_shortened(text)!r}: {error}") from None
-        result = np.asarray(result)
-        if np.iscomplexobj(result):  # not reachable with real operands; guard anyway
-            raise ExpressionError(f"expression {_shortened(text)!r} has complex values")
-        return np.broadcast_to(result, shape)
+        with np.errstate(all="ignore"):  # every operand is a numpy float: 1/0 is inf, not an exception
+            result = evaluate(values)
+        return np.broadcast_to(np.asarray(result), shape)
 
     expression.text = text  # type: ignore[attr-defined]
     return expression

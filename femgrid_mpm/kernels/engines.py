@@ -139,8 +139,8 @@ class CompiledTransfer:
         # G2P), whose serial kernel the basis' form picks (None: tensor)
         threads = int(getattr(simulation.scene.solver, "threads", 1))
         self.threads = min(threads, numba.config.NUMBA_NUM_THREADS) if family in ("tensor", "folded") else 1
-        # the threaded kernels' arguments: the tensor ones with no form, the folded ones with their fold
-        self._chunked_arrays = self._arrays[:8] + (None,) + self._arrays[8:] if family == "tensor" else self._arrays
+        # the threaded kernels' arguments: a form before the connectivity (the fold's place), None for tensor bases
+        self._chunked_arrays = (*self._arrays[:-1], None, self._arrays[-1]) if family == "tensor" else self._arrays
         if self.threads > 1:
             numba.set_num_threads(self.threads)
             self._mass_parts = np.zeros((self.threads, n_nodes))

@@ -18,7 +18,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 from numba import prange
-
 from numba.extending import overload
 
 from .transfer import (local_g2p, local_linear_elastic_stress_and_force, local_p2g_sums, tensor_g2p,
