@@ -7,6 +7,13 @@ reference square.  ``MeshQuad.init_tensor`` orders an element's vertices
 (x0,y0), (x0,y1), (x1,y1), (x1,y0), so reference X0 runs along global *y*:
 the map is read off ``mesh.p``/``mesh.t`` and asserted for every element
 instead of being assumed.
+
+The grid numbers the nodes along the lattice, column by column (x, then
+y), not as scikit-fem numbers its degrees of freedom (vertices, then edges
+by facet index, then centres): a node of element ``(ix, iy)`` is then an
+affine function of ``ix`` and ``iy``, which the compiled kernels compute
+instead of reading (:func:`femgrid_mpm.kernels.basis.lattice_numbering`).
+``Discretization.dofs`` keeps scikit-fem's number of each node.
 """
 
 from __future__ import annotations
@@ -54,8 +61,12 @@ class FiniteElementBasis:
 
         to_reference, offset = _reference_map(mesh, width)
         order = _element_order(mesh, lower, width, n_elements)
-        connectivity = np.ascontiguousarray(basis.element_dofs[:, order].T, dtype=np.int32)
         nodes = _snap_to_lattice(basis.doflocs.T, lower, spacing)
+        dofs = _lattice_order(nodes, lower, spacing)
+        number = np.empty(len(dofs), dtype=np.int64)
+        number[dofs] = np.arange(len(dofs))
+        connectivity = np.ascontiguousarray(number[basis.element_dofs[:, order].T], dtype=np.int32)
+        nodes = np.ascontiguousarray(nodes[dofs])
         local_basis = LocalPolynomials.from_lbasis(
             element.lbasis, connectivity.shape[1], self.degree, to_reference, offset
         )
@@ -71,6 +82,7 @@ class FiniteElementBasis:
             mesh=mesh,
             element=element,
             nonnegative=self.nonnegative,
+            dofs=dofs,
         )
 
 
@@ -113,6 +125,12 @@ def _element_order(mesh: skfem.MeshQuad, lower: np.ndarray, width: float, n_elem
     if np.any(order < 0):
         raise AssertionError("scikit-fem elements do not tile the lattice")
     return order
+
+
+def _lattice_order(nodes: np.ndarray, lower: np.ndarray, spacing: float) -> np.ndarray:
+    """scikit-fem's degrees of freedom sorted along the lattice: by x index, then by y index."""
+    index = np.rint((nodes - lower) / spacing).astype(np.int64)
+    return np.lexsort((index[:, 1], index[:, 0]))
 
 
 def _snap_to_lattice(points: np.ndarray, lower: np.ndarray, spacing: float) -> np.ndarray:

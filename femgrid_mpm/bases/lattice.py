@@ -27,7 +27,8 @@ class Discretization:
     n_elements : (int, int)
         Elements along x and y.
     nodes : ndarray, shape (n_nodes, 2)
-        Node coordinates (m), exactly ``lower + i * spacing``.
+        Node coordinates (m), exactly ``lower + i * spacing``, numbered along
+        the lattice: by x index, then by y index.
     connectivity : ndarray, shape (n_elements_x * n_elements_y, n_local), int32
         Node indices of the local functions of element ``ix * n_elements_y + iy``.
     local_basis : LocalPolynomials or TensorSplines
@@ -41,6 +42,9 @@ class Discretization:
     nonnegative : bool
         Whether every shape function is >= 0 (q1, bspline3), so that grid
         masses can never be negative.
+    dofs : ndarray of int64, shape (n_nodes,), or None
+        scikit-fem's number of each node's degree of freedom in ``mesh``'s
+        basis (None for bases that scikit-fem does not define).
     """
 
     basis: str
@@ -54,3 +58,4 @@ class Discretization:
     mesh: Any
     element: Any
     nonnegative: bool
+    dofs: Any = None

@@ -29,7 +29,7 @@ def _is_tensor(form) -> bool:
 
 
 def _p2g_chunk(x, v, mass_p, density_p, v_ref, signed, hrz, marker, geometry, n_elements, factors_x, table_x,
-               factors_y, table_y, uniform, form, connectivity, grid_mass, grid_absolute, grid_volume,
+               factors_y, table_y, uniform, form, topology, grid_mass, grid_absolute, grid_volume,
                momentum):  # pragma: no cover - replaced by the overload in numba
     """The serial P2G of one chunk (lumped or HRZ): tensor or folded by ``form``."""
     raise NotImplementedError("only callable from compiled code")
@@ -37,25 +37,25 @@ def _p2g_chunk(x, v, mass_p, density_p, v_ref, signed, hrz, marker, geometry, n_
 
 @overload(_p2g_chunk, inline="always")
 def _p2g_chunk_kernel(x, v, mass_p, density_p, v_ref, signed, hrz, marker, geometry, n_elements, factors_x, table_x,
-                      factors_y, table_y, uniform, form, connectivity, grid_mass, grid_absolute, grid_volume, momentum):
+                      factors_y, table_y, uniform, form, topology, grid_mass, grid_absolute, grid_volume, momentum):
     if _is_tensor(form):
         def tensor(x, v, mass_p, density_p, v_ref, signed, hrz, marker, geometry, n_elements, factors_x, table_x,
-                   factors_y, table_y, uniform, form, connectivity, grid_mass, grid_absolute, grid_volume, momentum):
+                   factors_y, table_y, uniform, form, topology, grid_mass, grid_absolute, grid_volume, momentum):
             return tensor_p2g_sums(x, v, mass_p, density_p, v_ref, signed, False, hrz, marker, geometry, n_elements,
-                                   factors_x, table_x, factors_y, table_y, uniform, connectivity, grid_mass,
+                                   factors_x, table_x, factors_y, table_y, uniform, topology, grid_mass,
                                    grid_absolute, grid_volume, momentum)
         return tensor
 
     def folded(x, v, mass_p, density_p, v_ref, signed, hrz, marker, geometry, n_elements, factors_x, table_x,
-               factors_y, table_y, uniform, form, connectivity, grid_mass, grid_absolute, grid_volume, momentum):
+               factors_y, table_y, uniform, form, topology, grid_mass, grid_absolute, grid_volume, momentum):
         return local_p2g_sums(x, v, mass_p, density_p, v_ref, signed, False, hrz, marker, geometry, n_elements,
-                              factors_x, table_x, factors_y, table_y, uniform, form, connectivity, grid_mass,
+                              factors_x, table_x, factors_y, table_y, uniform, form, topology, grid_mass,
                               grid_absolute, grid_volume, momentum)
     return folded
 
 
 def _stress_and_force_chunk(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame, marker, geometry,
-                            n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity, strain,
+                            n_elements, factors_x, table_x, factors_y, table_y, uniform, form, topology, strain,
                             stress, force, start_motion):  # pragma: no cover - replaced by the overload in numba
     """The serial linear elastic stress and force pass of one chunk: tensor or folded by ``form``."""
     raise NotImplementedError("only callable from compiled code")
@@ -63,46 +63,46 @@ def _stress_and_force_chunk(x, velocity, v_ref, relative, dt, mass_p, density_p,
 
 @overload(_stress_and_force_chunk, inline="always")
 def _stress_and_force_chunk_kernel(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame, marker, geometry,
-                                   n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity,
+                                   n_elements, factors_x, table_x, factors_y, table_y, uniform, form, topology,
                                    strain, stress, force, start_motion):
     if _is_tensor(form):
         def tensor(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame, marker, geometry, n_elements,
-                   factors_x, table_x, factors_y, table_y, uniform, form, connectivity, strain, stress, force,
+                   factors_x, table_x, factors_y, table_y, uniform, form, topology, strain, stress, force,
                    start_motion):
             return tensor_linear_elastic_stress_and_force(
                 x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame, marker, geometry, n_elements,
-                factors_x, table_x, factors_y, table_y, uniform, connectivity, strain, stress, force, start_motion)
+                factors_x, table_x, factors_y, table_y, uniform, topology, strain, stress, force, start_motion)
         return tensor
 
     def folded(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame, marker, geometry, n_elements,
-               factors_x, table_x, factors_y, table_y, uniform, form, connectivity, strain, stress, force,
+               factors_x, table_x, factors_y, table_y, uniform, form, topology, strain, stress, force,
                start_motion):
         return local_linear_elastic_stress_and_force(
             x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame, marker, geometry, n_elements,
-            factors_x, table_x, factors_y, table_y, uniform, form, connectivity, strain, stress, force, start_motion)
+            factors_x, table_x, factors_y, table_y, uniform, form, topology, strain, stress, force, start_motion)
     return folded
 
 
 def _g2p_chunk(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz, marker, geometry, n_elements, factors_x,
-               table_x, factors_y, table_y, uniform, form, connectivity):  # pragma: no cover - replaced by the overload
+               table_x, factors_y, table_y, uniform, form, topology):  # pragma: no cover - replaced by the overload
     """The serial G2P of one chunk: tensor or folded by ``form``."""
     raise NotImplementedError("only callable from compiled code")
 
 
 @overload(_g2p_chunk, inline="always")
 def _g2p_chunk_kernel(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz, marker, geometry, n_elements,
-                      factors_x, table_x, factors_y, table_y, uniform, form, connectivity):
+                      factors_x, table_x, factors_y, table_y, uniform, form, topology):
     if _is_tensor(form):
         def tensor(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz, marker, geometry, n_elements,
-                   factors_x, table_x, factors_y, table_y, uniform, form, connectivity):
+                   factors_x, table_x, factors_y, table_y, uniform, form, topology):
             return tensor_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz, marker, geometry,
-                              n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity)
+                              n_elements, factors_x, table_x, factors_y, table_y, uniform, topology)
         return tensor
 
     def folded(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz, marker, geometry, n_elements,
-               factors_x, table_x, factors_y, table_y, uniform, form, connectivity):
+               factors_x, table_x, factors_y, table_y, uniform, form, topology):
         return local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz, marker, geometry, n_elements,
-                         factors_x, table_x, factors_y, table_y, uniform, form, connectivity)
+                         factors_x, table_x, factors_y, table_y, uniform, form, topology)
     return folded
 
 
@@ -125,7 +125,7 @@ def _sum_parts(parts, out):
 
 @numba.njit(cache=True, parallel=True)
 def parallel_p2g(x, v, mass_p, density_p, v_ref, signed, hrz,
-                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity,
+                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, topology,
                  grid_mass, grid_absolute, momentum, mass_parts, absolute_parts, momentum_parts):
     """The lumped or HRZ P2G (:func:`tensor_p2g_sums`, :func:`local_p2g_sums`) over chunks of
     points; returns the first point outside, or -1."""
@@ -137,7 +137,7 @@ def parallel_p2g(x, v, mass_p, density_p, v_ref, signed, hrz,
         start, stop = _bounds(chunk, n_chunks, n)
         found = _p2g_chunk(x[start:stop], v[start:stop], mass_p[start:stop], density_p[start:stop], v_ref, signed,
                            hrz, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
-                           connectivity, mass_parts[chunk], absolute_parts[chunk], no_volume, momentum_parts[chunk])
+                           topology, mass_parts[chunk], absolute_parts[chunk], no_volume, momentum_parts[chunk])
         if found >= 0:
             outside[chunk] = start + found
     for chunk in range(n_chunks):
@@ -153,7 +153,7 @@ def parallel_p2g(x, v, mass_p, density_p, v_ref, signed, hrz,
 @numba.njit(cache=True, parallel=True)
 def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
-                              connectivity, strain, stress, force, start_motion, force_parts, relative_parts):
+                              topology, strain, stress, force, start_motion, force_parts, relative_parts):
     """The linear elastic stress and force pass (:func:`tensor_linear_elastic_stress_and_force`,
     :func:`local_linear_elastic_stress_and_force`) over chunks of points."""
     n_chunks = force_parts.shape[0]
@@ -164,7 +164,7 @@ def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_
         totals[chunk] = _stress_and_force_chunk(
             x[start:stop], velocity, v_ref, relative_parts[chunk], dt, mass_p[start:stop], density_p[start:stop],
             body[start:stop], lame, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
-            form, connectivity, strain[start:stop], stress[start:stop], force_parts[chunk], start_motion[start:stop])
+            form, topology, strain[start:stop], stress[start:stop], force_parts[chunk], start_motion[start:stop])
     _sum_parts(force_parts, force)
     relative[:] = relative_parts[0]
     total = 0.0
@@ -175,7 +175,7 @@ def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_
 
 @numba.njit(cache=True, parallel=True)
 def parallel_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
-                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity,
+                 marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, topology,
                  n_chunks):
     """G2P (:func:`tensor_g2p`, :func:`local_g2p`) over chunks of points (no scatter: nothing to
     combine but the checksum)."""
@@ -185,7 +185,7 @@ def parallel_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
         start, stop = _bounds(chunk, n_chunks, n)
         totals[chunk] = _g2p_chunk(x[start:stop], v[start:stop], density_p[start:stop], acceleration, v_ref, dt,
                                    start_motion[start:stop], hrz, marker, geometry, n_elements, factors_x, table_x,
-                                   factors_y, table_y, uniform, form, connectivity)
+                                   factors_y, table_y, uniform, form, topology)
     total = 0.0
     for chunk in range(n_chunks):
         total += totals[chunk]

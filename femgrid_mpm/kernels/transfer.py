@@ -140,7 +140,7 @@ def _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion):
 
 # -- any basis, function by function: the flat (tables) and folded (serendipity) forms -----------------
 #
-# ``point_weights`` gives a point's element and the values and gradients of
+# ``point_weights`` gives a point's nodes and the values and gradients of
 # its local functions (scratch arrays for the flat form, register tuples for
 # the folded one); ``function_slots`` their count and the slot that is no
 # function (the folded form's centre; -1 for none).  Each kernel is compiled
@@ -148,7 +148,7 @@ def _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion):
 
 
 @numba.njit(cache=True, inline="always")
-def _local_gradient(element, count, skip, connectivity, relative, w, wx, wy):
+def _local_gradient(nodes, count, skip, relative, w, wx, wy):
     """``dNdx @ v_rel``, ``dNdy @ v_rel`` and ``N @ v_rel`` at one point:
     (d vx/dx, d vy/dx, d vx/dy, d vy/dy, vx, vy)."""
     dvx_dx = 0.0
@@ -160,7 +160,7 @@ def _local_gradient(element, count, skip, connectivity, relative, w, wx, wy):
     for k in range(count):
         if k == skip:
             continue
-        node = connectivity[element, k]
+        node = nodes[k]
         rx = relative[node, 0]
         ry = relative[node, 1]
         dvx_dx += wx[k] * rx
@@ -173,19 +173,19 @@ def _local_gradient(element, count, skip, connectivity, relative, w, wx, wy):
 
 
 @numba.njit(cache=True, inline="always")
-def _local_force(element, count, skip, connectivity, wx, wy, w_xx, w_yy, w_xy, force):
+def _local_force(nodes, count, skip, wx, wy, w_xx, w_yy, w_xy, force):
     """One point's share of Eq. 11, ``-V sigma grad N``, scattered to its nodes."""
     for k in range(count):
         if k == skip:
             continue
-        node = connectivity[element, k]
+        node = nodes[k]
         force[node, 0] -= wx[k] * w_xx + wy[k] * w_xy
         force[node, 1] -= wx[k] * w_xy + wy[k] * w_yy
 
 
 @numba.njit(cache=True)
 def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
-              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity,
+              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, topology,
               grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, centre,
               ordered, mirror_target, mirror_source, matrix):
     """Scatter mass, relative momentum (and the mass matrix, into the fixed
@@ -194,14 +194,14 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
 
     Returns the first point outside the grid, or -1.
     """
-    count, skip = function_slots(form, marker, connectivity)
-    work = point_work(form, factors_x, factors_y, connectivity.shape[1])
+    count, skip = function_slots(form, marker, topology)
+    work = point_work(form, factors_x, factors_y, topology)
     _clear_sums(signed or hrz, want_volume, assemble, grid_mass, momentum, grid_absolute, grid_volume, matrix)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
-                                           table_y, form, work)
-        if element < 0:
+        inside, nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                           table_y, topology, form, work)
+        if not inside:
             return p
         m = mass_p[p]
         px = m * (v[p, 0] - v_ref[0])
@@ -214,7 +214,7 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
             inverse = 1.0 / squares
             for k in range(count):
                 if k != skip:
-                    node = connectivity[element, k]
+                    node = nodes[k]
                     weight = w[k] * w[k] * inverse
                     grid_mass[node] += w[k] * m
                     grid_absolute[node] += weight * m
@@ -223,7 +223,7 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
         elif signed:  # also |N|.T @ m_p
             for k in range(count):
                 if k != skip:
-                    node = connectivity[element, k]
+                    node = nodes[k]
                     grid_mass[node] += w[k] * m
                     grid_absolute[node] += abs(w[k]) * m
                     momentum[node, 0] += w[k] * px
@@ -231,7 +231,7 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
         else:
             for k in range(count):
                 if k != skip:
-                    node = connectivity[element, k]
+                    node = nodes[k]
                     grid_mass[node] += w[k] * m
                     momentum[node, 0] += w[k] * px
                     momentum[node, 1] += w[k] * py
@@ -239,11 +239,11 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
             volume = m / density_p[p]
             for k in range(count):
                 if k != skip:
-                    grid_volume[connectivity[element, k]] += w[k] * volume
+                    grid_volume[nodes[k]] += w[k] * volume
         if assemble:  # the upper half in stencil order; the rest is mirrored after the pass
             for k in range(count):
                 if k != skip:
-                    node = connectivity[element, k]
+                    node = nodes[k]
                     weighted = w[k] * m
                     start = indptr[node]
                     full = complete[node]
@@ -259,79 +259,79 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
 @numba.njit(cache=True)
 def local_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                                           marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
-                                          uniform, form, connectivity, strain, stress, force, start_motion):
+                                          uniform, form, topology, strain, stress, force, start_motion):
     """Eqs. 18, 6 and 11 in one pass, for bodies of :class:`LinearElastic` material.
 
     ``lame[b] = (lambda, 2 mu)`` of body b.  Returns the sum of the new
     stresses (for the finiteness check).
     """
     _relative_velocity(velocity, v_ref, relative)
-    count, skip = function_slots(form, marker, connectivity)
-    work = point_work(form, factors_x, factors_y, connectivity.shape[1])
+    count, skip = function_slots(form, marker, topology)
+    work = point_work(form, factors_x, factors_y, topology)
     force[:] = 0.0
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
-                                           table_y, form, work)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _local_gradient(element, count, skip, connectivity, relative, w, wx, wy)
+        inside, nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                           table_y, topology, form, work)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _local_gradient(nodes, count, skip, relative, w, wx, wy)
         s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, body, strain, stress,
                                                  start_motion)
         total += s_xx + s_yy + s_xy
         volume = mass_p[p] / density_p[p]
-        _local_force(element, count, skip, connectivity, wx, wy, volume * s_xx, volume * s_yy, volume * s_xy, force)
+        _local_force(nodes, count, skip, wx, wy, volume * s_xx, volume * s_yy, volume * s_xy, force)
     return total
 
 
 @numba.njit(cache=True)
 def local_velocity_gradient(x, velocity, v_ref, relative, dt,
                             marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
-                            connectivity, strain, strain_increment, gradient_increment, start_motion):
+                            topology, strain, strain_increment, gradient_increment, start_motion):
     """Eq. 18 for any material: the strain increment (added to ``strain``) and ``dt L``."""
     _relative_velocity(velocity, v_ref, relative)
-    count, skip = function_slots(form, marker, connectivity)
-    work = point_work(form, factors_x, factors_y, connectivity.shape[1])
+    count, skip = function_slots(form, marker, topology)
+    work = point_work(form, factors_x, factors_y, topology)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
-                                           table_y, form, work)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _local_gradient(element, count, skip, connectivity, relative, w, wx, wy)
+        inside, nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                           table_y, topology, form, work)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _local_gradient(nodes, count, skip, relative, w, wx, wy)
         _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, strain_increment, gradient_increment, start_motion)
 
 
 @numba.njit(cache=True)
 def local_internal_force(x, mass_p, density_p, stress,
                          marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
-                         connectivity, force):
+                         topology, force):
     """Eq. 11: ``f_I = -sum_p V_p sigma_p grad N_I`` with the volumes of time t."""
-    count, skip = function_slots(form, marker, connectivity)
-    work = point_work(form, factors_x, factors_y, connectivity.shape[1])
+    count, skip = function_slots(form, marker, topology)
+    work = point_work(form, factors_x, factors_y, topology)
     force[:] = 0.0
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
-                                           table_y, form, work)
+        inside, nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                           table_y, topology, form, work)
         volume = mass_p[p] / density_p[p]
         total += stress[p, 0] + stress[p, 1] + stress[p, 2]
-        _local_force(element, count, skip, connectivity, wx, wy, volume * stress[p, 0], volume * stress[p, 1],
+        _local_force(nodes, count, skip, wx, wy, volume * stress[p, 0], volume * stress[p, 1],
                      volume * stress[p, 2], force)
     return total
 
 
 @numba.njit(cache=True)
 def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
-              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity):
+              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, topology):
     """Eqs. 19-21: point velocity from the grid acceleration, position from the
     grid velocity of the step's start and density from its divergence (both
     interpolated in the force pass: ``start_motion``).  Returns ``sum(v) + sum(x)``."""
-    count, skip = function_slots(form, marker, connectivity)
-    work = point_work(form, factors_x, factors_y, connectivity.shape[1])
+    count, skip = function_slots(form, marker, topology)
+    work = point_work(form, factors_x, factors_y, topology)
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
-                                           table_y, form, work)
+        inside, nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                           table_y, topology, form, work)
         ax = 0.0
         ay = 0.0
         if hrz:  # the HRZ weights carry the velocity increment
@@ -341,14 +341,14 @@ def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
             inverse = 1.0 / squares
             for k in range(count):
                 if k != skip:
-                    node = connectivity[element, k]
+                    node = nodes[k]
                     weight = w[k] * w[k] * inverse
                     ax += weight * acceleration[node, 0]
                     ay += weight * acceleration[node, 1]
         else:
             for k in range(count):
                 if k != skip:
-                    node = connectivity[element, k]
+                    node = nodes[k]
                     ax += w[k] * acceleration[node, 0]
                     ay += w[k] * acceleration[node, 1]
         total += _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion)
@@ -360,12 +360,14 @@ def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
 # With phi_(i,j) = U_i(xi) W_j(eta), a gather sum_ij phi_ij g_ij is
 # sum_i U_i (sum_j W_j g_ij) and its x-derivative reuses the inner sums;
 # a scatter multiplies per-i factors by W_j.  ``len(marker)`` (n1) is a
-# compile-time constant, so every loop over nodes is unrolled.
+# compile-time constant, so every loop over nodes is unrolled.  A point's
+# nodes are computed from its cell (``topology`` is the grid's numbering
+# along the lattice, see :func:`.basis.lattice_numbering`), not read.
 
 
 @numba.njit(cache=True)
 def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
-               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
+               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, topology,
                grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, centre,
                ordered, mirror_target, mirror_source, matrix):
     """:func:`local_p2g` for tensor-product bases (``slots`` in tensor order).
@@ -382,8 +384,9 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
     _clear_sums(signed or hrz, want_volume, assemble, grid_mass, momentum, grid_absolute, grid_volume, matrix)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
-        if element < 0:
+        inside, nodes, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x,
+                                                         factors_y, table_y, topology)
+        if not inside:
             return p
         m = mass_p[p]
         px = m * (v[p, 0] - v_ref[0])
@@ -397,7 +400,7 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                 px_i = gx[i] * px
                 py_i = gx[i] * py
                 for j in range(n1):
-                    node = connectivity[element, i * n1 + j]
+                    node = nodes[i * n1 + j]
                     grid_mass[node] += m_i * fy[j]
                     grid_absolute[node] += d_i * gy[j]
                     momentum[node, 0] += px_i * gy[j]
@@ -409,7 +412,7 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                 px_i = fx[i] * px
                 py_i = fx[i] * py
                 for j in range(n1):
-                    node = connectivity[element, i * n1 + j]
+                    node = nodes[i * n1 + j]
                     grid_mass[node] += m_i * fy[j]
                     grid_absolute[node] += a_i * abs(fy[j])
                     momentum[node, 0] += px_i * fy[j]
@@ -420,7 +423,7 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                 px_i = fx[i] * px
                 py_i = fx[i] * py
                 for j in range(n1):
-                    node = connectivity[element, i * n1 + j]
+                    node = nodes[i * n1 + j]
                     grid_mass[node] += m_i * fy[j]
                     momentum[node, 0] += px_i * fy[j]
                     momentum[node, 1] += py_i * fy[j]
@@ -429,12 +432,12 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
             for i in range(n1):
                 v_i = fx[i] * volume
                 for j in range(n1):
-                    grid_volume[connectivity[element, i * n1 + j]] += v_i * fy[j]
+                    grid_volume[nodes[i * n1 + j]] += v_i * fy[j]
         if assemble:  # the upper half, (k, l) >= (i, j); the rest is mirrored after the pass
             for i in range(n1):
                 for j in range(n1):
                     a = i * n1 + j
-                    node = connectivity[element, a]
+                    node = nodes[a]
                     start = indptr[node]
                     m_a = fx[i] * fy[j] * m
                     full = complete[node]
@@ -465,29 +468,29 @@ def _no_pattern():
 
 @numba.njit(cache=True)
 def tensor_p2g_sums(x, v, mass_p, density_p, v_ref, signed, want_volume, hrz,
-                    marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
+                    marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, topology,
                     grid_mass, grid_absolute, grid_volume, momentum):
     """:func:`tensor_p2g` with no mass matrix (lumped and HRZ mass): the pattern's nine
     arguments are not passed from Python, where unboxing them cost ~0.7 us a step."""
     index, table, flags, mirror, matrix = _no_pattern()
     return tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, False, hrz, marker, geometry, n_elements,
-                      factors_x, table_x, factors_y, table_y, uniform, connectivity, grid_mass, grid_absolute,
+                      factors_x, table_x, factors_y, table_y, uniform, topology, grid_mass, grid_absolute,
                       grid_volume, momentum, index, table, flags, table, 0, False, mirror, mirror, matrix)
 
 
 @numba.njit(cache=True)
 def local_p2g_sums(x, v, mass_p, density_p, v_ref, signed, want_volume, hrz,
-                   marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, connectivity,
+                   marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, topology,
                    grid_mass, grid_absolute, grid_volume, momentum):
     """:func:`local_p2g` with no mass matrix (see :func:`tensor_p2g_sums`)."""
     index, table, flags, mirror, matrix = _no_pattern()
     return local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, False, hrz, marker, geometry, n_elements,
-                     factors_x, table_x, factors_y, table_y, uniform, form, connectivity, grid_mass, grid_absolute,
+                     factors_x, table_x, factors_y, table_y, uniform, form, topology, grid_mass, grid_absolute,
                      grid_volume, momentum, index, table, flags, table, 0, False, mirror, mirror, matrix)
 
 
 @numba.njit(cache=True, inline="always")
-def _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative):
+def _tensor_gradient(nodes, fx, dfx, fy, dfy, n1, relative):
     """``dNdx @ v_rel``, ``dNdy @ v_rel`` and ``N @ v_rel`` of one point:
     (dvx/dx, dvy/dx, dvx/dy, dvy/dy, vx, vy); the last two reuse the inner sums."""
     dvx_dx = 0.0
@@ -502,7 +505,7 @@ def _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative):
         bx = 0.0
         by = 0.0
         for j in range(n1):
-            node = connectivity[element, i * n1 + j]
+            node = nodes[i * n1 + j]
             rx = relative[node, 0]
             ry = relative[node, 1]
             ax += fy[j] * rx
@@ -519,7 +522,7 @@ def _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative):
 
 
 @numba.njit(cache=True, inline="always")
-def _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, w_xx, w_yy, w_xy, force):
+def _tensor_force(nodes, fx, dfx, fy, dfy, n1, w_xx, w_yy, w_xy, force):
     """Scatter ``-(dNdx (V s_xx, V s_xy) + dNdy (V s_xy, V s_yy))`` of one point."""
     for i in range(n1):
         c_xx = dfx[i] * w_xx
@@ -527,7 +530,7 @@ def _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, w_xx, w_yy, w_xy,
         d_xy = dfx[i] * w_xy
         d_yy = fx[i] * w_yy
         for j in range(n1):
-            node = connectivity[element, i * n1 + j]
+            node = nodes[i * n1 + j]
             force[node, 0] -= fy[j] * c_xx + dfy[j] * c_xy
             force[node, 1] -= fy[j] * d_xy + dfy[j] * d_yy
 
@@ -535,7 +538,7 @@ def _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, w_xx, w_yy, w_xy,
 @numba.njit(cache=True)
 def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                                            marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
-                                           connectivity, strain, stress, force, start_motion):
+                                           topology, strain, stress, force, start_motion):
     """:func:`local_linear_elastic_stress_and_force` for tensor-product bases."""
     _relative_velocity(velocity, v_ref, relative)
     n1 = len(marker)
@@ -543,33 +546,35 @@ def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mas
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
+        nodes, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                                  table_y, topology)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _tensor_gradient(nodes, fx, dfx, fy, dfy, n1, relative)
         s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, body, strain, stress, start_motion)
         total += s_xx + s_yy + s_xy
         volume = mass_p[p] / density_p[p]
-        _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, volume * s_xx, volume * s_yy, volume * s_xy,
+        _tensor_force(nodes, fx, dfx, fy, dfy, n1, volume * s_xx, volume * s_yy, volume * s_xy,
                       force)
     return total
 
 
 @numba.njit(cache=True)
 def tensor_velocity_gradient(x, velocity, v_ref, relative, dt,
-                             marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
+                             marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, topology,
                              strain, strain_increment, gradient_increment, start_motion):
     """:func:`local_velocity_gradient` for tensor-product bases."""
     _relative_velocity(velocity, v_ref, relative)
     n1 = len(marker)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
-        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _tensor_gradient(element, fx, dfx, fy, dfy, n1, connectivity, relative)
+        nodes, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                                  table_y, topology)
+        dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _tensor_gradient(nodes, fx, dfx, fy, dfy, n1, relative)
         _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, strain_increment, gradient_increment, start_motion)
 
 
 @numba.njit(cache=True)
 def tensor_internal_force(x, mass_p, density_p, stress,
-                          marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity,
+                          marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, topology,
                           force):
     """:func:`local_internal_force` for tensor-product bases."""
     n1 = len(marker)
@@ -577,23 +582,25 @@ def tensor_internal_force(x, mass_p, density_p, stress,
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
+        nodes, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                                  table_y, topology)
         volume = mass_p[p] / density_p[p]
         total += stress[p, 0] + stress[p, 1] + stress[p, 2]
-        _tensor_force(element, fx, dfx, fy, dfy, n1, connectivity, volume * stress[p, 0], volume * stress[p, 1],
+        _tensor_force(nodes, fx, dfx, fy, dfy, n1, volume * stress[p, 0], volume * stress[p, 1],
                       volume * stress[p, 2], force)
     return total
 
 
 @numba.njit(cache=True)
 def tensor_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
-               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, connectivity):
+               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, topology):
     """:func:`local_g2p` for tensor-product bases."""
     n1 = len(marker)
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        element, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y)
+        nodes, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                                  table_y, topology)
         ax = 0.0
         ay = 0.0
         # what carries the velocity increment: N, or the HRZ weights
@@ -603,7 +610,7 @@ def tensor_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
             sax = 0.0
             say = 0.0
             for j in range(n1):
-                node = connectivity[element, i * n1 + j]
+                node = nodes[i * n1 + j]
                 sax += gy[j] * acceleration[node, 0]
                 say += gy[j] * acceleration[node, 1]
             ax += gx[i] * sax
