@@ -265,3 +265,19 @@ def test_open_knot_splines_equal_uniform_ones_in_the_interior():
     interior = "(x > 1) and (x < 4) and (y > 1) and (y < 3)"
     np.testing.assert_array_equal(open_grid.nodes[open_grid.nodes_where(interior)],
                                   ghost_grid.nodes[ghost_grid.nodes_where(interior)])
+
+
+@pytest.mark.parametrize("basis", BASIS_NAMES)
+def test_nodes_are_numbered_along_the_lattice(basis):
+    """By x index, then y index (what the compiled kernels' arithmetic numbering assumes;
+    scikit-fem numbers vertices, then edges by facet, then centres); for the scikit-fem
+    bases ``dofs`` maps back to scikit-fem's numbering."""
+    grid = make_grid(basis)
+    x, y = grid.nodes[:, 0], grid.nodes[:, 1]
+    np.testing.assert_array_equal(np.lexsort((y, x)), np.arange(grid.n_nodes))
+    dofs = grid.discretization.dofs
+    if basis in SKFEM_ELEMENTS:
+        reference = skfem.CellBasis(grid.mesh, SKFEM_ELEMENTS[basis]())
+        np.testing.assert_allclose(reference.doflocs.T[dofs], grid.nodes, rtol=0, atol=1e-12)
+    else:
+        assert dofs is None
