@@ -323,3 +323,36 @@ def test_assembled_mass_matrix_is_symmetric_and_matches_the_product(basis):
     N = simulation.grid.shape_functions(p.x)[0]
     product = (N.T @ sp.diags(p.mass) @ N).toarray()
     np.testing.assert_allclose(assembled.toarray(), product, rtol=0, atol=1e-12 * np.abs(product).max())
+
+
+def test_density_factor_is_exp_within_one_ulp():
+    """Eq. 21's ``exp(-dt div v)`` by its series below 2^-7 (inline, no libm call): at most
+    1 ulp from ``math.exp`` at every magnitude up to the bound, equal to it beyond
+    and for infinities and NaN."""
+    import math
+
+    import numba
+
+    from femgrid_mpm.kernels.transfer import SERIES_BOUND, density_factor
+
+    @numba.njit
+    def factors(arguments, out):
+        for i in range(arguments.shape[0]):
+            out[i] = density_factor(arguments[i])
+
+    rng = np.random.default_rng(7)
+    for magnitude in (1e-14, 1e-9, 1e-6, 1e-3, SERIES_BOUND, 0.1, 5.0):
+        arguments = rng.uniform(-magnitude, magnitude, 200_000)
+        series = np.empty_like(arguments)
+        factors(arguments, series)
+        libm = np.array([math.exp(a) for a in arguments])
+        assert np.max(np.abs(series - libm) / np.spacing(libm)) <= 1.0, magnitude
+        if magnitude > SERIES_BOUND:
+            outside = np.abs(arguments) > SERIES_BOUND
+            np.testing.assert_array_equal(series[outside], libm[outside])
+    special = np.array([np.inf, -np.inf, np.nan, 0.0, -0.0, SERIES_BOUND, -SERIES_BOUND])
+    out = np.empty_like(special)
+    factors(special, out)
+    np.testing.assert_array_equal(out[:2], [np.inf, 0.0])
+    assert np.isnan(out[2]) and out[3] == out[4] == 1.0
+    assert abs(out[5] - math.exp(SERIES_BOUND)) <= np.spacing(out[5])

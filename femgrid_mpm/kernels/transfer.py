@@ -125,6 +125,27 @@ def _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, stra
     _hand_over(p, dvx_dx + dvy_dy, ux, uy, start_motion)
 
 
+#: below this ``|a|`` :func:`density_factor` sums the series (the next term, a^7 / 7!, is 3.5e-19 of 1)
+SERIES_BOUND = 2.0**-7
+
+
+@numba.njit(cache=True, inline="always")
+def density_factor(a):
+    """``exp(a)`` for Eq. 21's ``a = -dt div v``, within 1 ulp of ``math.exp``.
+
+    ``|a|`` is almost always far below 1e-2 (a volumetric strain increment), where
+    the Taylor series to a^6 is exact to rounding: six products and additions
+    inline, against a call to libm's ``exp`` (~5 ns per point, most of it the
+    call itself; 2.2 ns of q1's G2P at 1e5 points).  Larger, infinite or NaN
+    arguments go to ``math.exp``.  Compared with ``math.exp`` on 2e6 arguments
+    per magnitude (``tests/test_kernels.py``): equal below 1e-8, at most 1 ulp
+    apart (0.2% of them) up to the bound.
+    """
+    if abs(a) <= SERIES_BOUND:
+        return 1.0 + a * (1.0 + a * (0.5 + a * (1.0 / 6.0 + a * (1.0 / 24.0 + a * (1.0 / 120.0 + a * (1.0 / 720.0))))))
+    return math.exp(a)
+
+
 @numba.njit(cache=True, inline="always")
 def _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion):
     """Eqs. 19-21 for point p from its interpolated acceleration (ax, ay) and what
@@ -134,7 +155,7 @@ def _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion):
     v[p, 1] += dt * ay
     x[p, 0] += dt * (start_motion[p, 1] + v_ref[0])
     x[p, 1] += dt * (start_motion[p, 2] + v_ref[1])
-    density_p[p] *= math.exp(-dt * start_motion[p, 0])
+    density_p[p] *= density_factor(-dt * start_motion[p, 0])
     return v[p, 0] + v[p, 1] + x[p, 0] + x[p, 1]
 
 
