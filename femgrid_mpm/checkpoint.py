@@ -49,7 +49,7 @@ from .output import CHECKPOINT_FILE, atomic_path
 __all__ = ["CHECKPOINT_FILE", "FORMAT", "CheckpointError", "read_checkpoint", "scene_digest", "write_checkpoint"]
 
 #: written into every checkpoint; a different one is refused
-FORMAT = "femgrid-mpm checkpoint 1"
+FORMAT = "femgrid-mpm checkpoint 2"  # 2: q2 and serendipity nodes numbered along the lattice
 _VALUES = "checkpoint"
 
 

@@ -110,6 +110,12 @@ class Grid:
     def nodes(self) -> np.ndarray:
         return self.discretization.nodes
 
+    @functools.cached_property
+    def lattice_indices(self) -> np.ndarray:
+        """(n_nodes, 2) int: each node's x and y index on the lattice, ``(nodes - lower) / spacing``
+        (the splines' Greville points of open knots are not on it: rounded)."""
+        return np.rint((self.nodes - self.lower) / self.spacing).astype(np.int64)
+
     @property
     def n_nodes(self) -> int:
         return len(self.discretization.nodes)

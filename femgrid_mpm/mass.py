@@ -330,6 +330,10 @@ class ConsistentMass:
     #: CG's preconditioner for cubic B-splines (see :func:`tensor_preconditioner`);
     #: None: Jacobi
     preconditioner: "TensorPreconditioner | None" = field(default=None, repr=False)
+    #: (n_nodes, 2) int, each node's place on the lattice (x and y index), and the width
+    #: of an element in lattice spacings: where CG looks for a singular block (signed bases)
+    lattice: np.ndarray | None = field(default=None, repr=False)
+    layer_width: int = 2
     #: the time step (s), set by the simulation: CG's first guess of the velocity
     #: is the last step's grid velocity advanced by its acceleration
     time_step: float | None = None
@@ -345,7 +349,6 @@ class ConsistentMass:
         # entries it overwrote), and M rebuilt from them on demand (:attr:`matrix`)
         self._assembled, self._correction, self._full = None, None, None
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
-        self._probe_rhs = np.random.default_rng(PROBE_SEED).uniform(0.5, 1.5, self.n_nodes)  # see _probe
 
     def state(self) -> tuple[dict, dict]:
         """What carries from step to step, ``(arrays, values)``: CG's warm-start
@@ -501,12 +504,15 @@ class ConsistentMass:
                 total = total + self.blend * excess[:, None] * frame[None, :]
             return total
 
-        solution, converged = self._solve(system, right_hand_side(), kind)
-        if converged and kind == "velocity" and not self._direct and not system.blended and not self.nonnegative:
-            converged = self._probe(system)
+        if self._singular_near_edges(system):  # CG would not see it (see the method)
+            solution, converged = np.zeros_like(part), False
+        else:
+            solution, converged = self._solve(system, right_hand_side(), kind)
         if not converged:
             if self.fallback != "blend":
-                how = "the direct solve left a large residual" if self._direct else "CG did not converge"
+                how = ("the direct solve left a large residual" if self._direct else
+                       "its block near the bodies' edges has a singular pivot" if system.singular else
+                       "CG did not converge")
                 raise SingularMassError(
                     f"the consistent mass matrix is singular or nearly so: {how} on the {kind} system "
                     f"(too few points per cell for the basis, or weakly supported nodes); use more points "
@@ -521,43 +527,50 @@ class ConsistentMass:
                                         self._weakest_node(system, right_hand_side(), solution))
         return solution
 
-    def _probe(self, system: "_System") -> bool:
-        """Whether CG finds the system regular: it solves it for a fixed right-hand side
-        with a component along every direction (:data:`PROBE_SEED`).
+    def _singular_near_edges(self, system: "_System") -> bool:
+        """Whether CG's system is singular, decided as the direct solver decides, for a
+        signed basis (q2, serendipity): by SuperLU's pivots (:data:`PIVOT_RATIO`) of its
+        block on the kept nodes within one element of an empty node or of the grid's
+        edge, once per step.
 
-        A momentum ``N.T (m v)`` lies in the range of ``M = N.T diag(m) N``, so CG
-        solves the velocity system even where M is singular (q2 and serendipity
-        elements a body fills in fewer rows of points than the element has
-        functions), and the velocity's part in M's null space, which moves no
-        point but does change the velocity gradient, is whatever the first
-        guess held: CG's stresses differed from the direct solver's by O(1) (the
-        direct solver finds the singular pivot and blends, CG blended only the
-        acceleration solve of the same step).  The probe has a part in the null
-        space, where CG cannot converge.  Its last solution is its first guess
-        (the matrix changes little from step to step) and it stops at a relative
-        residual of :data:`PROBE_TOLERANCE`: at 1e5 points 0.5-1.5 iterations a
-        step, 3.5% of q2's consistent step and 7% of serendipity's.
-
-        Only for signed bases (q2, serendipity): the non-negative ones lump their
-        weakly supported nodes instead (:meth:`_prepare`), and a probe cost cubic
-        splines 14% of their step.
+        CG alone does not see it.  A momentum ``N.T (m v)`` (and gravity's
+        ``N.T (m g)``) lies in the range of ``M = N.T diag(m) N``, so CG solves
+        such a system even where M is singular, and the solution keeps whatever
+        its first guess held in M's null space: that moves no point but changes
+        the velocity gradient.  Where q2 and serendipity elements were partly
+        filled, CG's stresses differed from the direct solver's by O(1) after
+        one step (it blended the acceleration solve only, when the force had a
+        part in the null space).  A null vector vanishes on the nodes of every
+        element whose points determine its polynomials, so it lives on partly
+        filled elements, next to empty nodes or the grid's edge; and M being positive
+        semi-definite, M is singular along a vector of the block exactly when
+        the block is.  (A body too sparse everywhere, fewer points per element
+        than functions, is singular in its interior: only the direct solver
+        finds that.)  Non-negative bases lump their weakly supported nodes
+        instead (:meth:`_prepare`) and are not checked.
         """
-        key = "probe" + "".join(str(c) for c in system.columns)
-        rhs = np.where(system.excluded, 0.0, self._probe_rhs)[:, None]
-        history = self._previous.get(key, ())
-        guess = history[-1] if history else np.zeros_like(rhs)
-        tensor = None if self.preconditioner is None else self.preconditioner.scaled(system)
-        layer = None if tensor is None else system.boundary_layer(self.preconditioner.lattice_shape, self._weak)
-        solution, converged, iterations = _preconditioned_cg(
-            system.matrix, rhs, guess, system.inverse_diagonal, PROBE_TOLERANCE, self.max_iterations, tensor, layer)
-        self.iterations += iterations
-        if converged:
-            self._previous[key] = (solution,)
-        return bool(converged)
+        if self._direct or self.nonnegative or system.blended or self.lattice is None:
+            return False
+        if system.singular is None:
+            system.singular, system.weakest = False, None
+            layer = _near_empty_nodes(self.lattice, ~self.active, self.layer_width) & ~system.excluded
+            nodes = np.flatnonzero(layer)
+            if nodes.size:
+                plain = sp.csr_matrix((system.matrix.data, system.matrix.indices, system.matrix.indptr),
+                                      shape=system.matrix.shape)
+                pivots = _pivots(plain[nodes][:, nodes])
+                if pivots is None:
+                    system.singular = True
+                elif np.min(pivots[1]) < PIVOT_RATIO:
+                    system.singular, system.weakest = True, int(nodes[pivots[2][np.argmin(pivots[1])]])
+        return system.singular
 
     def _weakest_node(self, system: "_System", rhs: np.ndarray, solution: np.ndarray) -> int | None:
         """Where a failed solve's matrix is weakest (for the stop's message): the node of the
-        smallest pivot against its diagonal entry (direct), or of the largest residual (CG)."""
+        smallest pivot against its diagonal entry (direct, or CG's check near the edges), or
+        of the largest residual (CG)."""
+        if system.singular:
+            return system.weakest
         if self._direct:
             return _smallest_pivot_node(system.matrix)
         residual = np.linalg.norm(rhs - system.matrix @ solution, axis=1)
@@ -630,6 +643,10 @@ class _System:
     factors: object
     blended: bool = False
     _layer: "BoundaryLayer | None | bool" = False  # False: not built yet
+    #: CG on a signed basis: whether the block near the edges is singular (None: not checked
+    #: yet this step) and the node of its smallest pivot (:meth:`ConsistentMass._singular_near_edges`)
+    singular: bool | None = None
+    weakest: int | None = None
 
     def boundary_layer(self, lattice_shape: tuple, weak: np.ndarray) -> "BoundaryLayer | None":
         """CG's boundary layer (:class:`BoundaryLayer`), built at the first solve of the
@@ -669,18 +686,23 @@ class _System:
         self._layer = False
 
 
-#: the seed of :meth:`ConsistentMass._probe`'s right-hand side (fixed: runs are reproducible)
-PROBE_SEED = 20070101
-#: the probe's relative residual: far above what a singular system leaves, sqrt(k / n) for a
-#: null vector on k of n nodes (0.02 for 10 of 26569), and a few iterations from the last solution
-PROBE_TOLERANCE = 1e-3
-
 #: a pivot this small against its own diagonal entry means singular.
 #: Measured: well-posed matrices >= 1e-4 (cubic splines at a clamp); the
 #: rank-deficient case (cubic splines, 2 points per cell, a body 2 cells
 #: thick) between 1e-17 and 2e-10 from step to step, so 1e-10 let a few
 #: singular steps through and the run blew up.
 PIVOT_RATIO = 1e-8
+
+
+def _near_empty_nodes(lattice: np.ndarray, empty: np.ndarray, width: int) -> np.ndarray:
+    """(n_nodes,) bool: the nodes within ``width`` lattice steps (along x and y, and
+    diagonally) of an ``empty`` one or of the grid's edge (a body there fills its
+    elements partly too); ``lattice`` (n_nodes, 2) gives each node's indices."""
+    from scipy.ndimage import maximum_filter
+
+    image = np.zeros(tuple(lattice.max(axis=0) + 1), dtype=bool)
+    image[lattice[:, 0], lattice[:, 1]] = empty
+    return maximum_filter(image, size=2 * width + 1, mode="constant", cval=True)[lattice[:, 0], lattice[:, 1]]
 
 
 def _pivots(matrix: sp.csr_matrix):

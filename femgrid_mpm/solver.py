@@ -193,6 +193,8 @@ class Simulation:
             fallback=solver.consistent_fallback,
             blend=solver.blend,
             preconditioner=tensor_preconditioner(self.grid),
+            lattice=None if self.grid.nonnegative else self.grid.lattice_indices,
+            layer_width=self.grid.cells[0] // self.grid.discretization.n_elements[0],
         )
 
     def _time_step(self) -> float:
