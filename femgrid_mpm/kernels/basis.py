@@ -561,10 +561,11 @@ def _folded_weights(fx, dfx, fy, dfy, fold):
 
 def point_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y, topology, form,
                   work):  # pragma: no cover
-    """``(inside, nodes, w, wx, wy)``: whether a point is in the grid, its nodes
-    (:func:`cell_nodes`) and the values and gradients of its local functions, for
-    ``form`` = ``(terms, term_weights)`` (:class:`BasisTables`: into the scratch
-    arrays ``work``) or a fold (:class:`FoldedTables`: register tuples in slot order)."""
+    """``(nodes, w, wx, wy)`` of a point in the grid (see :func:`located_weights`; P2G tests
+    :func:`inside_grid` first): its nodes (:func:`cell_nodes`) and the values and
+    gradients of its local functions, for ``form`` = ``(terms, term_weights)``
+    (:class:`BasisTables`: into the scratch arrays ``work``) or a fold
+    (:class:`FoldedTables`: register tuples in slot order)."""
     raise NotImplementedError("only callable from compiled code")
 
 
@@ -572,17 +573,17 @@ def point_weights(px, py, constants, marker, factors_x, table_x, factors_y, tabl
 def _point_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y, topology, form, work):
     if isinstance(form, numba.types.UniTuple) and isinstance(form.dtype, numba.types.Float):
         def folded(px, py, constants, marker, factors_x, table_x, factors_y, table_y, topology, form, work):
-            inside, nodes, fx, dfx, fy, dfy = tensor_weights(px, py, constants, marker, factors_x, table_x,
-                                                             factors_y, table_y, topology)
+            nodes, fx, dfx, fy, dfy = located_weights(px, py, constants, marker, factors_x, table_x, factors_y,
+                                                      table_y, topology)
             w, wx, wy = folded_weights(fx, dfx, fy, dfy, form)
-            return inside, nodes, w, wx, wy
+            return nodes, w, wx, wy
         return folded
 
     def flat(px, py, constants, marker, factors_x, table_x, factors_y, table_y, topology, form, work):
         q, qx, qy, unused, w, wx, wy = work
         inside, nodes = evaluate_point(px, py, constants, marker, factors_x, table_x, factors_y, table_y, topology,
                                        form[0], form[1], q, qx, qy, unused, w, wx, wy)
-        return inside, nodes, w, wx, wy
+        return nodes, w, wx, wy
     return flat
 
 
@@ -671,14 +672,22 @@ def tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y
 
 
 @numba.njit(cache=True, inline="always")
+def inside_grid(px, py, constants):
+    """Whether a point lies in the grid (False for NaN): P2G's test of every point,
+    before its weights (a test first and a return was ~1 ns per point faster than
+    weights at a safe cell and a select)."""
+    return px >= constants[0] and px <= constants[2] and py >= constants[1] and py <= constants[3]
+
+
+@numba.njit(cache=True, inline="always")
 def located_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y, topology):
     """Nodes (:func:`cell_nodes`) and the 1D factors ``(fx, dfx, fy, dfy)`` of a point in the grid.
 
     Located as :meth:`Grid.locate` does (same arithmetic, so the same cell and
-    cell coordinates bit for bit).  The passes after P2G call it directly: P2G
-    has located every point of the step and stopped at the first outside, and
-    without the test and its selects the force pass and G2P are ~1-2 ns per
-    point faster.
+    cell coordinates bit for bit).  Every pass calls it directly: P2G after
+    :func:`inside_grid` (it stops at the first point outside), the force pass
+    and G2P with no test, as P2G has located every point of the step (without
+    the test and its selects they are ~1-2 ns per point faster).
     """
     lower_x, lower_y, upper_x, upper_y, scale, n_x, n_y, first_x, last_x, first_y, last_y, uniform_x, uniform_y = constants
     sx = (px - lower_x) * scale

@@ -41,8 +41,8 @@ import math
 import numba
 import numpy as np
 
-from .basis import (function_slots, located_weights, normalized_squares, point_weights, point_work, tensor_constants,
-                    tensor_weights)
+from .basis import (function_slots, inside_grid, located_weights, normalized_squares, point_weights, point_work,
+                    tensor_constants)
 
 
 @numba.njit(cache=True, inline="always")
@@ -220,10 +220,10 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
     _clear_sums(signed or hrz, want_volume, assemble, grid_mass, momentum, grid_absolute, grid_volume, matrix)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        inside, nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
-                                           table_y, topology, form, work)
-        if not inside:
+        if not inside_grid(x[p, 0], x[p, 1], constants):
             return p
+        nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                         table_y, topology, form, work)
         m = mass_p[p]
         px = m * (v[p, 0] - v_ref[0])
         py = m * (v[p, 1] - v_ref[1])
@@ -293,8 +293,8 @@ def local_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        inside, nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
-                                           table_y, topology, form, work)
+        nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                         table_y, topology, form, work)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _local_gradient(nodes, count, skip, relative, w, wx, wy)
         s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, body, strain, stress,
                                                  start_motion)
@@ -314,8 +314,8 @@ def local_velocity_gradient(x, velocity, v_ref, relative, dt,
     work = point_work(form, factors_x, factors_y, topology)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        inside, nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
-                                           table_y, topology, form, work)
+        nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                         table_y, topology, form, work)
         dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _local_gradient(nodes, count, skip, relative, w, wx, wy)
         _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, strain_increment, gradient_increment, start_motion)
 
@@ -331,8 +331,8 @@ def local_internal_force(x, mass_p, density_p, stress,
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        inside, nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
-                                           table_y, topology, form, work)
+        nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                         table_y, topology, form, work)
         volume = mass_p[p] / density_p[p]
         total += stress[p, 0] + stress[p, 1] + stress[p, 2]
         _local_force(nodes, count, skip, wx, wy, volume * stress[p, 0], volume * stress[p, 1],
@@ -351,8 +351,8 @@ def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
     total = 0.0
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        inside, nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
-                                           table_y, topology, form, work)
+        nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                         table_y, topology, form, work)
         ax = 0.0
         ay = 0.0
         if hrz:  # the HRZ weights carry the velocity increment
@@ -405,10 +405,10 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
     _clear_sums(signed or hrz, want_volume, assemble, grid_mass, momentum, grid_absolute, grid_volume, matrix)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        inside, nodes, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x,
-                                                         factors_y, table_y, topology)
-        if not inside:
+        if not inside_grid(x[p, 0], x[p, 1], constants):
             return p
+        nodes, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
+                                                  table_y, topology)
         m = mass_p[p]
         px = m * (v[p, 0] - v_ref[0])
         py = m * (v[p, 1] - v_ref[1])
