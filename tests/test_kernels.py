@@ -11,7 +11,7 @@ import pytest
 
 from femgrid_mpm import Grid
 from femgrid_mpm.bases import BASES
-from femgrid_mpm.kernels.basis import evaluate_shape_functions, separated_tables, shape_function_data
+from femgrid_mpm.kernels.basis import LINEAR, evaluate_shape_functions, separated_tables, shape_function_data
 from femgrid_mpm.scene import Scene
 from femgrid_mpm.solver import Simulation
 
@@ -55,6 +55,8 @@ def test_tensor_kernels_cover_the_tensor_bases():
     tables = {name: separated_tables(Grid(name, (0, 0), (2, 2), 0.5)) for name in BASIS_NAMES}
     assert {name for name, t in tables.items() if t.tensor is not None} == {"q1", "q2", "bspline3", "bspline3_open"}
     assert {name for name, t in tables.items() if t.folded is not None} == {"serendipity"}
+    # and q1's factors, exactly (1 - s, s), are computed as such (the values: the tests above)
+    assert {name for name, t in tables.items() if t.tensor is not None and t.tensor.marker == LINEAR} == {"q1"}
 
 
 @pytest.mark.parametrize("columns", [1, 2, 3])
