@@ -26,6 +26,7 @@ from numba.extending import overload
 import numpy as np
 
 from ..bases import LocalPolynomials, TensorSplines
+from .arithmetic import fused
 
 
 @dataclass(frozen=True)
@@ -486,31 +487,32 @@ def factors_1d(s, c, scale):  # pragma: no cover - replaced by the overload in n
 
 @overload(factors_1d, inline="always")
 def _factors_1d(s, c, scale):
+    # Horner's scheme, each step one fused multiply-add (:mod:`.arithmetic`)
     n1 = len(c.types) if hasattr(c, "types") else c.count
     if n1 == 2:
         def linear(s, c, scale):
-            return ((c[0][1] * s + c[0][0], c[1][1] * s + c[1][0]),
+            return ((fused(c[0][1], s, c[0][0]), fused(c[1][1], s, c[1][0])),
                     (c[0][1] * scale, c[1][1] * scale))
         return linear
     if n1 == 3:
         def quadratic(s, c, scale):
-            return (((c[0][2] * s + c[0][1]) * s + c[0][0],
-                     (c[1][2] * s + c[1][1]) * s + c[1][0],
-                     (c[2][2] * s + c[2][1]) * s + c[2][0]),
-                    ((2.0 * c[0][2] * s + c[0][1]) * scale,
-                     (2.0 * c[1][2] * s + c[1][1]) * scale,
-                     (2.0 * c[2][2] * s + c[2][1]) * scale))
+            return ((fused(fused(c[0][2], s, c[0][1]), s, c[0][0]),
+                     fused(fused(c[1][2], s, c[1][1]), s, c[1][0]),
+                     fused(fused(c[2][2], s, c[2][1]), s, c[2][0])),
+                    (fused(2.0 * c[0][2], s, c[0][1]) * scale,
+                     fused(2.0 * c[1][2], s, c[1][1]) * scale,
+                     fused(2.0 * c[2][2], s, c[2][1]) * scale))
         return quadratic
     if n1 == 4:
         def cubic(s, c, scale):
-            return ((((c[0][3] * s + c[0][2]) * s + c[0][1]) * s + c[0][0],
-                     ((c[1][3] * s + c[1][2]) * s + c[1][1]) * s + c[1][0],
-                     ((c[2][3] * s + c[2][2]) * s + c[2][1]) * s + c[2][0],
-                     ((c[3][3] * s + c[3][2]) * s + c[3][1]) * s + c[3][0]),
-                    (((3.0 * c[0][3] * s + 2.0 * c[0][2]) * s + c[0][1]) * scale,
-                     ((3.0 * c[1][3] * s + 2.0 * c[1][2]) * s + c[1][1]) * scale,
-                     ((3.0 * c[2][3] * s + 2.0 * c[2][2]) * s + c[2][1]) * scale,
-                     ((3.0 * c[3][3] * s + 2.0 * c[3][2]) * s + c[3][1]) * scale))
+            return ((fused(fused(fused(c[0][3], s, c[0][2]), s, c[0][1]), s, c[0][0]),
+                     fused(fused(fused(c[1][3], s, c[1][2]), s, c[1][1]), s, c[1][0]),
+                     fused(fused(fused(c[2][3], s, c[2][2]), s, c[2][1]), s, c[2][0]),
+                     fused(fused(fused(c[3][3], s, c[3][2]), s, c[3][1]), s, c[3][0])),
+                    (fused(fused(3.0 * c[0][3], s, 2.0 * c[0][2]), s, c[0][1]) * scale,
+                     fused(fused(3.0 * c[1][3], s, 2.0 * c[1][2]), s, c[1][1]) * scale,
+                     fused(fused(3.0 * c[2][3], s, 2.0 * c[2][2]), s, c[2][1]) * scale,
+                     fused(fused(3.0 * c[3][3], s, 2.0 * c[3][2]), s, c[3][1]) * scale))
         return cubic
     return None
 

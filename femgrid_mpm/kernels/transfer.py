@@ -41,6 +41,7 @@ import math
 import numba
 import numpy as np
 
+from .arithmetic import fused
 from .basis import (function_slots, inside_grid, located_weights, normalized_squares, point_weights, point_work,
                     tensor_constants)
 
@@ -151,10 +152,10 @@ def _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion):
     """Eqs. 19-21 for point p from its interpolated acceleration (ax, ay) and what
     the force pass interpolated (``start_motion[p]``: ``div v`` and the relative
     grid velocity ``N @ v_rel``).  Returns ``v_x + v_y + x + y``."""
-    v[p, 0] += dt * ax
-    v[p, 1] += dt * ay
-    x[p, 0] += dt * (start_motion[p, 1] + v_ref[0])
-    x[p, 1] += dt * (start_motion[p, 2] + v_ref[1])
+    v[p, 0] = fused(dt, ax, v[p, 0])
+    v[p, 1] = fused(dt, ay, v[p, 1])
+    x[p, 0] = fused(dt, start_motion[p, 1] + v_ref[0], x[p, 0])
+    x[p, 1] = fused(dt, start_motion[p, 2] + v_ref[1], x[p, 1])
     density_p[p] *= density_factor(-dt * start_motion[p, 0])
     return v[p, 0] + v[p, 1] + x[p, 0] + x[p, 1]
 
@@ -184,12 +185,12 @@ def _local_gradient(nodes, count, skip, relative, w, wx, wy):
         node = nodes[k]
         rx = relative[node, 0]
         ry = relative[node, 1]
-        dvx_dx += wx[k] * rx
-        dvy_dx += wx[k] * ry
-        dvx_dy += wy[k] * rx
-        dvy_dy += wy[k] * ry
-        ux += w[k] * rx
-        uy += w[k] * ry
+        dvx_dx = fused(wx[k], rx, dvx_dx)
+        dvy_dx = fused(wx[k], ry, dvy_dx)
+        dvx_dy = fused(wy[k], rx, dvx_dy)
+        dvy_dy = fused(wy[k], ry, dvy_dy)
+        ux = fused(w[k], rx, ux)
+        uy = fused(w[k], ry, uy)
     return dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy
 
 
@@ -200,8 +201,8 @@ def _local_force(nodes, count, skip, wx, wy, w_xx, w_yy, w_xy, force):
         if k == skip:
             continue
         node = nodes[k]
-        force[node, 0] -= wx[k] * w_xx + wy[k] * w_xy
-        force[node, 1] -= wx[k] * w_xy + wy[k] * w_yy
+        force[node, 0] = fused(-wx[k], w_xx, fused(-wy[k], w_xy, force[node, 0]))
+        force[node, 1] = fused(-wx[k], w_xy, fused(-wy[k], w_yy, force[node, 1]))
 
 
 @numba.njit(cache=True)
@@ -237,30 +238,31 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
                 if k != skip:
                     node = nodes[k]
                     weight = w[k] * w[k] * inverse
-                    grid_mass[node] += w[k] * m
-                    grid_absolute[node] += weight * m
-                    momentum[node, 0] += weight * px
-                    momentum[node, 1] += weight * py
+                    grid_mass[node] = fused(w[k], m, grid_mass[node])
+                    grid_absolute[node] = fused(weight, m, grid_absolute[node])
+                    momentum[node, 0] = fused(weight, px, momentum[node, 0])
+                    momentum[node, 1] = fused(weight, py, momentum[node, 1])
         elif signed:  # also |N|.T @ m_p
             for k in range(count):
                 if k != skip:
                     node = nodes[k]
-                    grid_mass[node] += w[k] * m
-                    grid_absolute[node] += abs(w[k]) * m
-                    momentum[node, 0] += w[k] * px
-                    momentum[node, 1] += w[k] * py
+                    grid_mass[node] = fused(w[k], m, grid_mass[node])
+                    grid_absolute[node] = fused(abs(w[k]), m, grid_absolute[node])
+                    momentum[node, 0] = fused(w[k], px, momentum[node, 0])
+                    momentum[node, 1] = fused(w[k], py, momentum[node, 1])
         else:
             for k in range(count):
                 if k != skip:
                     node = nodes[k]
-                    grid_mass[node] += w[k] * m
-                    momentum[node, 0] += w[k] * px
-                    momentum[node, 1] += w[k] * py
+                    grid_mass[node] = fused(w[k], m, grid_mass[node])
+                    momentum[node, 0] = fused(w[k], px, momentum[node, 0])
+                    momentum[node, 1] = fused(w[k], py, momentum[node, 1])
         if want_volume:
             volume = m / density_p[p]
             for k in range(count):
                 if k != skip:
-                    grid_volume[nodes[k]] += w[k] * volume
+                    node = nodes[k]
+                    grid_volume[node] = fused(w[k], volume, grid_volume[node])
         if assemble:  # the upper half in stencil order; the rest is mirrored after the pass
             for k in range(count):
                 if k != skip:
@@ -271,7 +273,8 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
                     for j in range(count):
                         slot = slots[k, j]
                         if j != skip and slot >= centre:
-                            matrix[start + (slot if full else rank[node, slot])] += weighted * w[j]
+                            entry = start + (slot if full else rank[node, slot])
+                            matrix[entry] = fused(weighted, w[j], matrix[entry])
     if assemble:
         _mirror(matrix, mirror_target, mirror_source)
     return -1
@@ -364,14 +367,14 @@ def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
                 if k != skip:
                     node = nodes[k]
                     weight = w[k] * w[k] * inverse
-                    ax += weight * acceleration[node, 0]
-                    ay += weight * acceleration[node, 1]
+                    ax = fused(weight, acceleration[node, 0], ax)
+                    ay = fused(weight, acceleration[node, 1], ay)
         else:
             for k in range(count):
                 if k != skip:
                     node = nodes[k]
-                    ax += w[k] * acceleration[node, 0]
-                    ay += w[k] * acceleration[node, 1]
+                    ax = fused(w[k], acceleration[node, 0], ax)
+                    ay = fused(w[k], acceleration[node, 1], ay)
         total += _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion)
     return total
 
@@ -422,10 +425,10 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                 py_i = gx[i] * py
                 for j in range(n1):
                     node = nodes[i * n1 + j]
-                    grid_mass[node] += m_i * fy[j]
-                    grid_absolute[node] += d_i * gy[j]
-                    momentum[node, 0] += px_i * gy[j]
-                    momentum[node, 1] += py_i * gy[j]
+                    grid_mass[node] = fused(m_i, fy[j], grid_mass[node])
+                    grid_absolute[node] = fused(d_i, gy[j], grid_absolute[node])
+                    momentum[node, 0] = fused(px_i, gy[j], momentum[node, 0])
+                    momentum[node, 1] = fused(py_i, gy[j], momentum[node, 1])
         elif signed:  # also |N|.T @ m_p
             for i in range(n1):
                 m_i = fx[i] * m
@@ -434,10 +437,10 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                 py_i = fx[i] * py
                 for j in range(n1):
                     node = nodes[i * n1 + j]
-                    grid_mass[node] += m_i * fy[j]
-                    grid_absolute[node] += a_i * abs(fy[j])
-                    momentum[node, 0] += px_i * fy[j]
-                    momentum[node, 1] += py_i * fy[j]
+                    grid_mass[node] = fused(m_i, fy[j], grid_mass[node])
+                    grid_absolute[node] = fused(a_i, abs(fy[j]), grid_absolute[node])
+                    momentum[node, 0] = fused(px_i, fy[j], momentum[node, 0])
+                    momentum[node, 1] = fused(py_i, fy[j], momentum[node, 1])
         else:
             for i in range(n1):
                 m_i = fx[i] * m
@@ -445,15 +448,16 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                 py_i = fx[i] * py
                 for j in range(n1):
                     node = nodes[i * n1 + j]
-                    grid_mass[node] += m_i * fy[j]
-                    momentum[node, 0] += px_i * fy[j]
-                    momentum[node, 1] += py_i * fy[j]
+                    grid_mass[node] = fused(m_i, fy[j], grid_mass[node])
+                    momentum[node, 0] = fused(px_i, fy[j], momentum[node, 0])
+                    momentum[node, 1] = fused(py_i, fy[j], momentum[node, 1])
         if want_volume:
             volume = m / density_p[p]
             for i in range(n1):
                 v_i = fx[i] * volume
                 for j in range(n1):
-                    grid_volume[nodes[i * n1 + j]] += v_i * fy[j]
+                    node = nodes[i * n1 + j]
+                    grid_volume[node] = fused(v_i, fy[j], grid_volume[node])
         if assemble:  # the upper half, (k, l) >= (i, j); the rest is mirrored after the pass
             for i in range(n1):
                 for j in range(n1):
@@ -468,14 +472,15 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                             first = start + slots[a, k * n1]
                             for l in range(n1):
                                 if k > i or (k == i and l >= j):
-                                    matrix[first + l] += m_ak * fy[l]
+                                    matrix[first + l] = fused(m_ak, fy[l], matrix[first + l])
                     else:
                         for k in range(n1):
                             m_ak = m_a * fx[k]
                             for l in range(n1):
                                 slot = slots[a, k * n1 + l]
                                 if slot >= centre:
-                                    matrix[start + (slot if full else rank[node, slot])] += m_ak * fy[l]
+                                    entry = start + (slot if full else rank[node, slot])
+                                    matrix[entry] = fused(m_ak, fy[l], matrix[entry])
     if assemble:
         _mirror(matrix, mirror_target, mirror_source)
     return -1
@@ -529,16 +534,16 @@ def _tensor_gradient(nodes, fx, dfx, fy, dfy, n1, relative):
             node = nodes[i * n1 + j]
             rx = relative[node, 0]
             ry = relative[node, 1]
-            ax += fy[j] * rx
-            ay += fy[j] * ry
-            bx += dfy[j] * rx
-            by += dfy[j] * ry
-        dvx_dx += dfx[i] * ax
-        dvy_dx += dfx[i] * ay
-        dvx_dy += fx[i] * bx
-        dvy_dy += fx[i] * by
-        ux += fx[i] * ax
-        uy += fx[i] * ay
+            ax = fused(fy[j], rx, ax)
+            ay = fused(fy[j], ry, ay)
+            bx = fused(dfy[j], rx, bx)
+            by = fused(dfy[j], ry, by)
+        dvx_dx = fused(dfx[i], ax, dvx_dx)
+        dvy_dx = fused(dfx[i], ay, dvy_dx)
+        dvx_dy = fused(fx[i], bx, dvx_dy)
+        dvy_dy = fused(fx[i], by, dvy_dy)
+        ux = fused(fx[i], ax, ux)
+        uy = fused(fx[i], ay, uy)
     return dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy
 
 
@@ -546,14 +551,14 @@ def _tensor_gradient(nodes, fx, dfx, fy, dfy, n1, relative):
 def _tensor_force(nodes, fx, dfx, fy, dfy, n1, w_xx, w_yy, w_xy, force):
     """Scatter ``-(dNdx (V s_xx, V s_xy) + dNdy (V s_xy, V s_yy))`` of one point."""
     for i in range(n1):
-        c_xx = dfx[i] * w_xx
-        c_xy = fx[i] * w_xy
-        d_xy = dfx[i] * w_xy
-        d_yy = fx[i] * w_yy
+        c_xx = -dfx[i] * w_xx
+        c_xy = -fx[i] * w_xy
+        d_xy = -dfx[i] * w_xy
+        d_yy = -fx[i] * w_yy
         for j in range(n1):
             node = nodes[i * n1 + j]
-            force[node, 0] -= fy[j] * c_xx + dfy[j] * c_xy
-            force[node, 1] -= fy[j] * d_xy + dfy[j] * d_yy
+            force[node, 0] = fused(fy[j], c_xx, fused(dfy[j], c_xy, force[node, 0]))
+            force[node, 1] = fused(fy[j], d_xy, fused(dfy[j], d_yy, force[node, 1]))
 
 
 @numba.njit(cache=True)
@@ -632,9 +637,9 @@ def tensor_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
             say = 0.0
             for j in range(n1):
                 node = nodes[i * n1 + j]
-                sax += gy[j] * acceleration[node, 0]
-                say += gy[j] * acceleration[node, 1]
-            ax += gx[i] * sax
-            ay += gx[i] * say
+                sax = fused(gy[j], acceleration[node, 0], sax)
+                say = fused(gy[j], acceleration[node, 1], say)
+            ax = fused(gx[i], sax, ax)
+            ay = fused(gx[i], say, ay)
         total += _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion)
     return total
