@@ -62,6 +62,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .kernels.arithmetic import fused
+
 #: largest number of active nodes for which "auto" factors the matrix
 DIRECT_LIMIT = 5000
 
@@ -959,20 +961,20 @@ def _row_times_dense(indptr, indices, data, x, i):
     while entry + 4 <= stop:
         j0, j1, j2, j3 = indices[entry], indices[entry + 1], indices[entry + 2], indices[entry + 3]
         d0, d1, d2, d3 = data[entry], data[entry + 1], data[entry + 2], data[entry + 3]
-        a0 += d0 * x[j0, 0]
-        b0 += d0 * x[j0, 1]
-        a1 += d1 * x[j1, 0]
-        b1 += d1 * x[j1, 1]
-        a2 += d2 * x[j2, 0]
-        b2 += d2 * x[j2, 1]
-        a3 += d3 * x[j3, 0]
-        b3 += d3 * x[j3, 1]
+        a0 = fused(d0, x[j0, 0], a0)
+        b0 = fused(d0, x[j0, 1], b0)
+        a1 = fused(d1, x[j1, 0], a1)
+        b1 = fused(d1, x[j1, 1], b1)
+        a2 = fused(d2, x[j2, 0], a2)
+        b2 = fused(d2, x[j2, 1], b2)
+        a3 = fused(d3, x[j3, 0], a3)
+        b3 = fused(d3, x[j3, 1], b3)
         entry += 4
     while entry < stop:
         j = indices[entry]
         d = data[entry]
-        a0 += d * x[j, 0]
-        b0 += d * x[j, 1]
+        a0 = fused(d, x[j, 0], a0)
+        b0 = fused(d, x[j, 1], b0)
         entry += 1
     return (a0 + a1) + (a2 + a3), (b0 + b1) + (b2 + b3)
 
@@ -997,16 +999,16 @@ def _csr_times_dense_dot(indptr, indices, data, x, out, dot):
             first, second = _row_times_dense(indptr, indices, data, x, i)
             out[i, 0] = first
             out[i, 1] = second
-            dot[0] += x[i, 0] * first
-            dot[1] += x[i, 1] * second
+            dot[0] = fused(x[i, 0], first, dot[0])
+            dot[1] = fused(x[i, 1], second, dot[1])
     else:  # any number of columns, one at a time
         for i in range(len(indptr) - 1):
             for c in range(x.shape[1]):
                 total = 0.0
                 for entry in range(indptr[i], indptr[i + 1]):
-                    total += data[entry] * x[indices[entry], c]
+                    total = fused(data[entry], x[indices[entry], c], total)
                 out[i, c] = total
-                dot[c] += x[i, c] * total
+                dot[c] = fused(x[i, c], total, dot[c])
 
 
 @numba.njit(cache=True)
@@ -1038,22 +1040,22 @@ def _symmetric_times_dense_dot(indptr, indices, data, upper_start, x, out, dot):
             while entry + 2 <= stop:
                 j0, j1 = indices[entry], indices[entry + 1]
                 d0, d1 = data[entry], data[entry + 1]
-                a0 += d0 * x[j0, 0]
-                b0 += d0 * x[j0, 1]
-                a1 += d1 * x[j1, 0]
-                b1 += d1 * x[j1, 1]
-                out[j0, 0] += d0 * xi0
-                out[j0, 1] += d0 * xi1
-                out[j1, 0] += d1 * xi0
-                out[j1, 1] += d1 * xi1
+                a0 = fused(d0, x[j0, 0], a0)
+                b0 = fused(d0, x[j0, 1], b0)
+                a1 = fused(d1, x[j1, 0], a1)
+                b1 = fused(d1, x[j1, 1], b1)
+                out[j0, 0] = fused(d0, xi0, out[j0, 0])
+                out[j0, 1] = fused(d0, xi1, out[j0, 1])
+                out[j1, 0] = fused(d1, xi0, out[j1, 0])
+                out[j1, 1] = fused(d1, xi1, out[j1, 1])
                 entry += 2
             if entry < stop:
                 j0 = indices[entry]
                 d0 = data[entry]
-                a0 += d0 * x[j0, 0]
-                b0 += d0 * x[j0, 1]
-                out[j0, 0] += d0 * xi0
-                out[j0, 1] += d0 * xi1
+                a0 = fused(d0, x[j0, 0], a0)
+                b0 = fused(d0, x[j0, 1], b0)
+                out[j0, 0] = fused(d0, xi0, out[j0, 0])
+                out[j0, 1] = fused(d0, xi1, out[j0, 1])
             out[i, 0] += a0 + a1
             out[i, 1] += b0 + b1
     else:
@@ -1063,12 +1065,12 @@ def _symmetric_times_dense_dot(indptr, indices, data, upper_start, x, out, dot):
                 total = data[diagonal] * x[i, c]
                 for entry in range(diagonal + 1, indptr[i + 1]):
                     j = indices[entry]
-                    total += data[entry] * x[j, c]
-                    out[j, c] += data[entry] * x[i, c]
+                    total = fused(data[entry], x[j, c], total)
+                    out[j, c] = fused(data[entry], x[i, c], out[j, c])
                 out[i, c] += total
     for i in range(n):  # every row is complete only now
         for c in range(k):
-            dot[c] += x[i, c] * out[i, c]
+            dot[c] = fused(x[i, c], out[i, c], dot[c])
 
 
 @numba.njit(cache=True, inline="always")
@@ -1121,7 +1123,7 @@ def _compiled_cg(indptr, indices, data, upper_start, b, x0, inverse_diagonal, rt
         for c in range(k):
             r[i, c] = b[i, c] - r[i, c]
             target[c] += b[i, c] * b[i, c]
-            residual[c] += r[i, c] * r[i, c]
+            residual[c] = fused(r[i, c], r[i, c], residual[c])
     for c in range(k):
         target[c] = rtol * np.sqrt(target[c])
     _precondition(r, z, use_tensor, inverse_diagonal, scale, excluded, factor_x, factor_y)
@@ -1151,27 +1153,27 @@ def _compiled_cg(indptr, indices, data, upper_start, b, x0, inverse_diagonal, rt
         if use_tensor:
             for i in range(n):
                 for c in range(k):
-                    x[i, c] += alpha[c] * p[i, c]
-                    r[i, c] -= alpha[c] * Ap[i, c]
-                    residual[c] += r[i, c] * r[i, c]
+                    x[i, c] = fused(alpha[c], p[i, c], x[i, c])
+                    r[i, c] = fused(-alpha[c], Ap[i, c], r[i, c])
+                    residual[c] = fused(r[i, c], r[i, c], residual[c])
             _apply_tensor(r, z, scale, excluded, factor_x, factor_y)
             for i in range(n):
                 for c in range(k):
-                    rz_new[c] += r[i, c] * z[i, c]
+                    rz_new[c] = fused(r[i, c], z[i, c], rz_new[c])
         else:
             for i in range(n):
                 for c in range(k):
-                    x[i, c] += alpha[c] * p[i, c]
-                    r[i, c] -= alpha[c] * Ap[i, c]
+                    x[i, c] = fused(alpha[c], p[i, c], x[i, c])
+                    r[i, c] = fused(-alpha[c], Ap[i, c], r[i, c])
                     z[i, c] = inverse_diagonal[i] * r[i, c]
-                    rz_new[c] += r[i, c] * z[i, c]
-                    residual[c] += r[i, c] * r[i, c]
+                    rz_new[c] = fused(r[i, c], z[i, c], rz_new[c])
+                    residual[c] = fused(r[i, c], r[i, c], residual[c])
         for c in range(k):
             beta[c] = rz_new[c] / rz[c] if rz[c] != 0.0 else 0.0
             rz[c] = rz_new[c]
         for i in range(n):
             for c in range(k):
-                p[i, c] = z[i, c] + beta[c] * p[i, c]
+                p[i, c] = fused(beta[c], p[i, c], z[i, c])
     return x, False, max_iterations
 
 
