@@ -3,7 +3,9 @@
 Absolute costs per particle-step depend on the machine (the same commit
 measured 63-81 ns for q1 on one machine of this kind and 90-98 ns on
 another).  This module is the same explicit step (paper section 3.2, USF,
-lumped mass, linear elastic, ``fastmath=False``) with none of the library's
+lumped mass, linear elastic, ``fastmath=False``, the library's arithmetic:
+explicit fused multiply-adds in the accumulations and Eq. 21's exponential
+by its series) with none of the library's
 generality: one uniform bilinear grid whose node ``(i, j)`` is numbered
 ``i * (n_y + 1) + j``, no tables, no frame of reference, no effect stages,
 no guards, no negative-mass checks, no output.  `benchmarks/step.py` times
@@ -22,10 +24,11 @@ True
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
+
+from femgrid_mpm.kernels.arithmetic import fused
+from femgrid_mpm.kernels.transfer import density_factor
 
 
 @numba.njit(cache=True, inline="always")
@@ -58,9 +61,9 @@ def minimal_step(x, v, mass, density, stress, strain, lame_lambda, two_mu, dt, l
             for dj, wy in ((0, 1.0 - fy), (1, fy)):
                 w = wx * wy
                 n = node + di * stride + dj
-                grid_mass[n] += w * m
-                momentum[n, 0] += w * m * v[p, 0]
-                momentum[n, 1] += w * m * v[p, 1]
+                grid_mass[n] = fused(w, m, grid_mass[n])
+                momentum[n, 0] = fused(w * m, v[p, 0], momentum[n, 0])
+                momentum[n, 1] = fused(w * m, v[p, 1], momentum[n, 1])
     for n in range(grid_mass.shape[0]):  # Eq. 17
         inverse = 1.0 / grid_mass[n] if grid_mass[n] > 0.0 else 0.0
         velocity[n, 0] = momentum[n, 0] * inverse
@@ -72,12 +75,12 @@ def minimal_step(x, v, mass, density, stress, strain, lame_lambda, two_mu, dt, l
         for di, wx, gx in ((0, 1.0 - fx, -inverse_spacing), (1, fx, inverse_spacing)):
             for dj, wy, gy in ((0, 1.0 - fy, -inverse_spacing), (1, fy, inverse_spacing)):
                 n = node + di * stride + dj
-                dvx_dx += gx * wy * velocity[n, 0]
-                dvy_dx += gx * wy * velocity[n, 1]
-                dvx_dy += wx * gy * velocity[n, 0]
-                dvy_dy += wx * gy * velocity[n, 1]
-                ux += wx * wy * velocity[n, 0]
-                uy += wx * wy * velocity[n, 1]
+                dvx_dx = fused(gx * wy, velocity[n, 0], dvx_dx)
+                dvy_dx = fused(gx * wy, velocity[n, 1], dvy_dx)
+                dvx_dy = fused(wx * gy, velocity[n, 0], dvx_dy)
+                dvy_dy = fused(wx * gy, velocity[n, 1], dvy_dy)
+                ux = fused(wx * wy, velocity[n, 0], ux)
+                uy = fused(wx * wy, velocity[n, 1], uy)
         e_xx = dt * dvx_dx
         e_yy = dt * dvy_dy
         e_xy = dt * 0.5 * (dvx_dy + dvy_dx)
@@ -94,8 +97,8 @@ def minimal_step(x, v, mass, density, stress, strain, lame_lambda, two_mu, dt, l
         for di, wx, gx in ((0, 1.0 - fx, -inverse_spacing), (1, fx, inverse_spacing)):
             for dj, wy, gy in ((0, 1.0 - fy, -inverse_spacing), (1, fy, inverse_spacing)):
                 n = node + di * stride + dj
-                force[n, 0] -= volume * (gx * wy * stress[p, 0] + wx * gy * stress[p, 2])
-                force[n, 1] -= volume * (gx * wy * stress[p, 2] + wx * gy * stress[p, 1])
+                force[n, 0] = fused(-volume, fused(gx * wy, stress[p, 0], wx * gy * stress[p, 2]), force[n, 0])
+                force[n, 1] = fused(-volume, fused(gx * wy, stress[p, 2], wx * gy * stress[p, 1]), force[n, 1])
     for n in range(grid_mass.shape[0]):  # a = f / m, in place
         inverse = 1.0 / grid_mass[n] if grid_mass[n] > 0.0 else 0.0
         force[n, 0] *= inverse
@@ -106,13 +109,13 @@ def minimal_step(x, v, mass, density, stress, strain, lame_lambda, two_mu, dt, l
         for di, wx in ((0, 1.0 - fx), (1, fx)):
             for dj, wy in ((0, 1.0 - fy), (1, fy)):
                 n = node + di * stride + dj
-                ax += wx * wy * force[n, 0]
-                ay += wx * wy * force[n, 1]
-        v[p, 0] += dt * ax
-        v[p, 1] += dt * ay
-        x[p, 0] += dt * start[p, 1]
-        x[p, 1] += dt * start[p, 2]
-        density[p] *= math.exp(-dt * start[p, 0])
+                ax = fused(wx * wy, force[n, 0], ax)
+                ay = fused(wx * wy, force[n, 1], ay)
+        v[p, 0] = fused(dt, ax, v[p, 0])
+        v[p, 1] = fused(dt, ay, v[p, 1])
+        x[p, 0] = fused(dt, start[p, 1], x[p, 0])
+        x[p, 1] = fused(dt, start[p, 2], x[p, 1])
+        density[p] *= density_factor(-dt * start[p, 0])
 
 
 def block(side: int, E: float = 1e4, nu: float = 0.3, density: float = 1e3) -> dict:
