@@ -1091,7 +1091,7 @@ def _transpose_times_dense(indptr, indices, data, y, n_columns):
         for entry in range(indptr[row], indptr[row + 1]):
             j = indices[entry]
             for c in range(y.shape[1]):
-                out[j, c] += data[entry] * y[row, c]
+                out[j, c] = fused(data[entry], y[row, c], out[j, c])
     return out
 
 
@@ -1322,29 +1322,31 @@ def _banded_sweeps(factor, values, count, n_lines):
     """Solve ``U^T U z = values`` in place on ``n_lines`` independent lattice lines
     at once (U upper banded, bandwidth 3, ``factor[3 + i - j, j] = U[i, j]``):
     entry ``j`` of line ``l`` is ``values[j * n_lines + l]``, so the inner loop
-    runs over contiguous, independent lines."""
+    runs over contiguous, independent lines.  The diagonal is inverted once (a
+    product per entry instead of a division)."""
+    inverse = 1.0 / factor[3]
     for j in range(count):
         row = j * n_lines
         for line in range(n_lines):
             total = values[row + line]
             if j >= 3:
-                total -= factor[0, j] * values[row - 3 * n_lines + line]
+                total = fused(-factor[0, j], values[row - 3 * n_lines + line], total)
             if j >= 2:
-                total -= factor[1, j] * values[row - 2 * n_lines + line]
+                total = fused(-factor[1, j], values[row - 2 * n_lines + line], total)
             if j >= 1:
-                total -= factor[2, j] * values[row - n_lines + line]
-            values[row + line] = total / factor[3, j]
+                total = fused(-factor[2, j], values[row - n_lines + line], total)
+            values[row + line] = total * inverse[j]
     for i in range(count - 1, -1, -1):
         row = i * n_lines
         for line in range(n_lines):
             total = values[row + line]
             if i + 1 < count:
-                total -= factor[2, i + 1] * values[row + n_lines + line]
+                total = fused(-factor[2, i + 1], values[row + n_lines + line], total)
             if i + 2 < count:
-                total -= factor[1, i + 2] * values[row + 2 * n_lines + line]
+                total = fused(-factor[1, i + 2], values[row + 2 * n_lines + line], total)
             if i + 3 < count:
-                total -= factor[0, i + 3] * values[row + 3 * n_lines + line]
-            values[row + line] = total / factor[3, i]
+                total = fused(-factor[0, i + 3], values[row + 3 * n_lines + line], total)
+            values[row + line] = total * inverse[i]
 
 
 @numba.njit(cache=True)
