@@ -1095,6 +1095,15 @@ def _transpose_times_dense(indptr, indices, data, y, n_columns):
     return out
 
 
+@numba.njit(cache=True, inline="always")
+def _all_within(residual, target):
+    """Whether every column's squared residual norm is within its target norm."""
+    for c in range(residual.shape[0]):
+        if np.sqrt(residual[c]) > target[c]:
+            return False
+    return True
+
+
 @numba.njit(cache=True)
 def _compiled_cg(indptr, indices, data, upper_start, b, x0, inverse_diagonal, rtol, max_iterations,
                  use_tensor, scale, excluded, factor_x, factor_y):
@@ -1126,6 +1135,8 @@ def _compiled_cg(indptr, indices, data, upper_start, b, x0, inverse_diagonal, rt
             residual[c] = fused(r[i, c], r[i, c], residual[c])
     for c in range(k):
         target[c] = rtol * np.sqrt(target[c])
+    if _all_within(residual, target):  # the first guess is the solution: no preconditioning
+        return x, True, 0
     _precondition(r, z, use_tensor, inverse_diagonal, scale, excluded, factor_x, factor_y)
     for i in range(n):
         for c in range(k):
@@ -1156,6 +1167,8 @@ def _compiled_cg(indptr, indices, data, upper_start, b, x0, inverse_diagonal, rt
                     x[i, c] = fused(alpha[c], p[i, c], x[i, c])
                     r[i, c] = fused(-alpha[c], Ap[i, c], r[i, c])
                     residual[c] = fused(r[i, c], r[i, c], residual[c])
+            if _all_within(residual, target):  # converged: the preconditioner's sweep would go unused
+                return x, True, iteration + 1
             _apply_tensor(r, z, scale, excluded, factor_x, factor_y)
             for i in range(n):
                 for c in range(k):
@@ -1458,14 +1471,16 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=
     x = np.array(x0, dtype=float)
     target = rtol * np.linalg.norm(b, axis=0)
     r = b - A @ x
+    residual = np.einsum("ij,ij->j", r, r)
+    if np.all(np.sqrt(residual) <= target):  # the first guess is the solution: no preconditioning
+        return x, True, 0
     z = precondition(r)
     p = z.copy()
     rz = np.einsum("ij,ij->j", r, z)
     if np.any(rz < 0):
         return x, None, 0
-    residual = np.einsum("ij,ij->j", r, r)
     for iteration in range(max_iterations + 1):
-        if np.all(np.sqrt(residual) <= target) or not np.any(rz):
+        if not np.any(rz):
             return x, True, iteration
         if iteration == max_iterations:
             break
@@ -1475,6 +1490,8 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=
             return x, False, iteration
         alpha = np.divide(rz, curvature, out=np.zeros_like(rz), where=curvature > 0)
         _cg_advance(x, r, p, Ap, alpha, residual)
+        if np.all(np.sqrt(residual) <= target):  # converged: the preconditioner's sweep would go unused
+            return x, True, iteration + 1
         z = precondition(r)
         rz_new = np.einsum("ij,ij->j", r, z)
         if np.any(rz_new < 0):
