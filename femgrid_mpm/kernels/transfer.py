@@ -42,7 +42,7 @@ import numba
 import numpy as np
 
 from .arithmetic import fused
-from .basis import (function_slots, inside_grid, located_weights, normalized_squares, point_weights, point_work,
+from .basis import (function_slots, inside_grid, located_weights, point_weights, point_work, squares,
                     tensor_constants)
 
 
@@ -415,14 +415,18 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
         m = mass_p[p]
         px = m * (v[p, 0] - v_ref[0])
         py = m * (v[p, 1] - v_ref[1])
-        if hrz:  # W_ij = gx_i gy_j carries the momentum; its column sums are the diagonal mass
-            gx = normalized_squares(fx)
-            gy = normalized_squares(fy)
+        if hrz:  # W_ij = U_i^2 W_j^2 / (sum U^2 sum W^2) carries the momentum; its column sums are the diagonal mass
+            gx, sum_x = squares(fx)
+            gy, sum_y = squares(fy)
+            inverse = 1.0 / (sum_x * sum_y)  # one division a point, into the point's factors
+            m_w = m * inverse
+            px_w = px * inverse
+            py_w = py * inverse
             for i in range(n1):
                 m_i = fx[i] * m
-                d_i = gx[i] * m
-                px_i = gx[i] * px
-                py_i = gx[i] * py
+                d_i = gx[i] * m_w
+                px_i = gx[i] * px_w
+                py_i = gx[i] * py_w
                 for j in range(n1):
                     node = nodes[i * n1 + j]
                     grid_mass[node] = fused(m_i, fy[j], grid_mass[node])
@@ -629,9 +633,9 @@ def tensor_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
                                                   table_y, topology)
         ax = 0.0
         ay = 0.0
-        # what carries the velocity increment: N, or the HRZ weights
-        gx = normalized_squares(fx) if hrz else fx
-        gy = normalized_squares(fy) if hrz else fy
+        # what carries the velocity increment: N, or the HRZ weights (their normalization after the sums)
+        gx, sum_x = squares(fx) if hrz else (fx, 1.0)
+        gy, sum_y = squares(fy) if hrz else (fy, 1.0)
         for i in range(n1):
             sax = 0.0
             say = 0.0
@@ -641,5 +645,9 @@ def tensor_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
                 say = fused(gy[j], acceleration[node, 1], say)
             ax = fused(gx[i], sax, ax)
             ay = fused(gx[i], say, ay)
+        if hrz:
+            inverse = 1.0 / (sum_x * sum_y)
+            ax *= inverse
+            ay *= inverse
         total += _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion)
     return total
