@@ -1442,6 +1442,26 @@ def _cg_direction(p, z, beta):
             p[i, c] = z[i, c] + beta[c] * p[i, c]
 
 
+@numba.njit(cache=True)
+def _column_dots(a, b):
+    """``a[:, c] . b[:, c]`` for each column (numpy's einsum took ~100 us for (27225, 2))."""
+    out = np.zeros(a.shape[1])
+    for i in range(a.shape[0]):
+        for c in range(a.shape[1]):
+            out[c] = fused(a[i, c], b[i, c], out[c])
+    return out
+
+
+def _product_and_curvature(A, p):
+    """``A @ p`` and ``p . A p`` per column, in one compiled pass where ``A`` is compiled."""
+    if isinstance(A, _CompiledCSR):
+        Ap, curvature = np.empty_like(p), np.zeros(p.shape[1])
+        _product_dot(A.indptr, A.indices, A.data, A.upper_start_or_none(), p, Ap, curvature)
+        return Ap, curvature
+    Ap = A @ p
+    return Ap, _column_dots(p, np.ascontiguousarray(Ap))
+
+
 def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=None, layer=None):
     """Preconditioned CG on the columns of ``b`` (n, k) at once: Jacobi, or the
     arguments of :func:`_apply_tensor` (``tensor``), completed by a
@@ -1471,12 +1491,12 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=
     x = np.array(x0, dtype=float)
     target = rtol * np.linalg.norm(b, axis=0)
     r = b - A @ x
-    residual = np.einsum("ij,ij->j", r, r)
+    residual = _column_dots(r, r)
     if np.all(np.sqrt(residual) <= target):  # the first guess is the solution: no preconditioning
         return x, True, 0
     z = precondition(r)
     p = z.copy()
-    rz = np.einsum("ij,ij->j", r, z)
+    rz = _column_dots(r, z)
     if np.any(rz < 0):
         return x, None, 0
     for iteration in range(max_iterations + 1):
@@ -1484,8 +1504,7 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=
             return x, True, iteration
         if iteration == max_iterations:
             break
-        Ap = A @ p
-        curvature = np.einsum("ij,ij->j", p, Ap)
+        Ap, curvature = _product_and_curvature(A, p)
         if np.any((curvature <= 0) & (rz != 0)):
             return x, False, iteration
         alpha = np.divide(rz, curvature, out=np.zeros_like(rz), where=curvature > 0)
@@ -1493,7 +1512,7 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=
         if np.all(np.sqrt(residual) <= target):  # converged: the preconditioner's sweep would go unused
             return x, True, iteration + 1
         z = precondition(r)
-        rz_new = np.einsum("ij,ij->j", r, z)
+        rz_new = _column_dots(r, z)
         if np.any(rz_new < 0):
             return x, None, iteration + 1
         beta = np.divide(rz_new, rz, out=np.zeros_like(rz), where=rz != 0)
