@@ -233,15 +233,18 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
             squares = 0.0
             for k in range(count):
                 squares += w[k] * w[k]  # a skipped slot's weight is exactly zero
-            inverse = 1.0 / squares
+            inverse = 1.0 / squares  # into the point's mass and momentum: one product a point, not a node
+            m_w = m * inverse
+            px_w = px * inverse
+            py_w = py * inverse
             for k in range(count):
                 if k != skip:
                     node = nodes[k]
-                    weight = w[k] * w[k] * inverse
+                    square = w[k] * w[k]
                     grid_mass[node] = fused(w[k], m, grid_mass[node])
-                    grid_absolute[node] = fused(weight, m, grid_absolute[node])
-                    momentum[node, 0] = fused(weight, px, momentum[node, 0])
-                    momentum[node, 1] = fused(weight, py, momentum[node, 1])
+                    grid_absolute[node] = fused(square, m_w, grid_absolute[node])
+                    momentum[node, 0] = fused(square, px_w, momentum[node, 0])
+                    momentum[node, 1] = fused(square, py_w, momentum[node, 1])
         elif signed:  # also |N|.T @ m_p
             for k in range(count):
                 if k != skip:
@@ -362,13 +365,15 @@ def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
             squares = 0.0
             for k in range(count):
                 squares += w[k] * w[k]
-            inverse = 1.0 / squares
             for k in range(count):
                 if k != skip:
                     node = nodes[k]
-                    weight = w[k] * w[k] * inverse
-                    ax = fused(weight, acceleration[node, 0], ax)
-                    ay = fused(weight, acceleration[node, 1], ay)
+                    square = w[k] * w[k]
+                    ax = fused(square, acceleration[node, 0], ax)
+                    ay = fused(square, acceleration[node, 1], ay)
+            inverse = 1.0 / squares  # after the sums: one product a point, not a node
+            ax *= inverse
+            ay *= inverse
         else:
             for k in range(count):
                 if k != skip:
