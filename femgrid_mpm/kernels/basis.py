@@ -534,8 +534,9 @@ def _cell_factors(s, cell, first, last, uniform, factors, table, marker, scale):
         return linear
 
     def tables(s, cell, first, last, uniform, factors, table, marker, scale):
-        c = uniform if first <= cell <= last else load_table(factors, table[cell], marker)
-        return factors_1d(s, c, scale)
+        if first <= cell <= last:  # (two returns: a conditional expression of inlined overloads upsets numba's SSA)
+            return factors_1d(s, uniform, scale)
+        return factors_1d(s, load_table(factors, table[cell], marker), scale)
     return tables
 
 
@@ -579,7 +580,7 @@ def _folded_source(n1: int) -> str:
              f"    q = fx[{c}] * fy[{c}]", f"    qx = dfx[{c}] * fy[{c}]", f"    qy = fx[{c}] * dfy[{c}]"]
     slots = [(i, j) for i in range(n1) for j in range(n1)]
     for name, a, b, centre in (("w", "fx", "fy", "q"), ("wx", "dfx", "fy", "qx"), ("wy", "fx", "dfy", "qy")):
-        terms = ", ".join(f"{a}[{i}] * {b}[{j}] + fold[{i * n1 + j}] * {centre}" for i, j in slots)
+        terms = ", ".join(f"fused(fold[{i * n1 + j}], {centre}, {a}[{i}] * {b}[{j}])" for i, j in slots)
         lines.append(f"    {name} = ({terms})")
     lines.append("    return w, wx, wy")
     return "\n".join(lines)
@@ -587,7 +588,7 @@ def _folded_source(n1: int) -> str:
 
 @overload(folded_weights, inline="always")
 def _folded_weights(fx, dfx, fy, dfy, fold):
-    namespace: dict = {}
+    namespace: dict = {"fused": fused}
     exec(_folded_source(fx.count), namespace)  # noqa: S102 - generated from integers only
     return namespace["folded"]
 

@@ -232,7 +232,8 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
         if hrz:  # W = N^2 / sum N^2 carries the momentum; its column sums are the diagonal mass
             squares = 0.0
             for k in range(count):
-                squares += w[k] * w[k]  # a skipped slot's weight is exactly zero
+                if k != skip:
+                    squares += w[k] * w[k]
             inverse = 1.0 / squares  # into the point's mass and momentum: one product a point, not a node
             m_w = m * inverse
             px_w = px * inverse
@@ -364,7 +365,8 @@ def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
         if hrz:  # the HRZ weights carry the velocity increment
             squares = 0.0
             for k in range(count):
-                squares += w[k] * w[k]
+                if k != skip:
+                    squares += w[k] * w[k]
             for k in range(count):
                 if k != skip:
                     node = nodes[k]
