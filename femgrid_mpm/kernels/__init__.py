@@ -19,6 +19,10 @@
               ``[solver] engine``.
 
 Every kernel is serial, ``cache=True`` (compiled once per machine, then
-loaded: about 30-45 s the first time for every basis and mass kind) and
-``fastmath=False``: results are reproducible bit for bit from run to run.
+loaded: about 50-57 s the first time for every basis and mass kind) and
+``fastmath=False``, its fused multiply-adds asked for by name
+(:mod:`.arithmetic`): results are reproducible bit for bit from run to run
+and from machine to machine.
+
+``arithmetic`` ``fused(a, b, c)``, the IEEE 754 fused multiply-add.
 """

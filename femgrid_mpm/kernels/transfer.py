@@ -31,7 +31,8 @@ For a tensor basis the weights are themselves products,
 ``W_ij = (U_i^2 / sum U^2) (W_j^2 / sum W^2)``.
 
 Every kernel is serial (``parallel`` variants are separate functions), uses
-``fastmath=False`` and is cached on disk (``cache=True``).
+``fastmath=False``, its accumulations fused multiply-adds by name
+(:func:`.arithmetic.fused`), and is cached on disk (``cache=True``).
 """
 
 from __future__ import annotations
