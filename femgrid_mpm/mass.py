@@ -558,9 +558,7 @@ class ConsistentMass:
             layer = _near_empty_nodes(self.lattice, ~self.active, self.layer_width) & ~system.excluded
             nodes = np.flatnonzero(layer)
             if nodes.size:
-                plain = sp.csr_matrix((system.matrix.data, system.matrix.indices, system.matrix.indptr),
-                                      shape=system.matrix.shape)
-                pivots = _pivots(plain[nodes][:, nodes])
+                pivots = _pivots(_rows_and_block(system.matrix, nodes)[1])
                 if pivots is None:
                     system.singular = True
                 elif np.min(pivots[1]) < PIVOT_RATIO:
@@ -696,10 +694,17 @@ class _System:
 PIVOT_RATIO = 1e-8
 
 
+def _rows_and_block(matrix: sp.csr_matrix, nodes: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """``M[nodes, :]`` and ``M[nodes][:, nodes]``, plain scipy matrices over ``matrix``'s arrays."""
+    rows = sp.csr_matrix((matrix.data, matrix.indices, matrix.indptr), shape=matrix.shape)[nodes]
+    return rows, rows[:, nodes]
+
+
 def _near_empty_nodes(lattice: np.ndarray, empty: np.ndarray, width: int) -> np.ndarray:
     """(n_nodes,) bool: the nodes within ``width`` lattice steps (along x and y, and
     diagonally) of an ``empty`` one or of the grid's edge (a body there fills its
-    elements partly too); ``lattice`` (n_nodes, 2) gives each node's indices."""
+    elements partly too); ``lattice`` (n_nodes, 2) gives each node's indices.  CG's
+    singularity check near the edges and its boundary layer (:class:`BoundaryLayer`)."""
     from scipy.ndimage import maximum_filter
 
     image = np.zeros(tuple(lattice.max(axis=0) + 1), dtype=bool)
@@ -1283,16 +1288,12 @@ class BoundaryLayer:
         """The layer of a system, or None if it is empty, holds more than
         :data:`LAYER_LIMIT` of the kept nodes, or its block is singular (CG
         then meets the singularity and reports it, as without a layer)."""
-        from scipy.ndimage import maximum_filter
-
-        irregular = np.pad((excluded | weak).reshape(lattice_shape), LAYER_WIDTH, constant_values=True)
-        near = maximum_filter(irregular, size=2 * LAYER_WIDTH + 1)[LAYER_WIDTH:-LAYER_WIDTH, LAYER_WIDTH:-LAYER_WIDTH]
-        nodes = np.flatnonzero(near.ravel() & ~excluded)
+        lattice = np.column_stack(np.unravel_index(np.arange(len(excluded)), lattice_shape))
+        nodes = np.flatnonzero(_near_empty_nodes(lattice, excluded | weak, LAYER_WIDTH) & ~excluded)
         if nodes.size == 0 or nodes.size > LAYER_LIMIT * np.count_nonzero(~excluded):
             return None
-        plain = sp.csr_matrix((matrix.data, matrix.indices, matrix.indptr), shape=matrix.shape)
-        rows = plain[nodes]
-        factors = _factor(rows[:, nodes])
+        rows, block = _rows_and_block(matrix, nodes)
+        factors = _factor(block)
         if factors is None:
             return None
         return cls(nodes, factors, _CompiledCSR(rows))

@@ -386,12 +386,10 @@ def _skeleton_terms(local: LocalPolynomials):
 @numba.njit(cache=True, inline="always")
 def evaluate_point(px, py, constants, marker, factors_x, table_x, factors_y, table_y, connectivity, terms,
                    term_weights, q, qx, qy, unused, w, wx, wy):
-    """Shape functions of one point into ``w, wx, wy`` (n_local); returns whether it is
-    inside the grid and its nodes (``connectivity``'s row)."""
-    inside, nodes, fx, dfx, fy, dfy = tensor_weights(px, py, constants, marker, factors_x, table_x, factors_y,
-                                                     table_y, connectivity)
-    if not inside:
-        return inside, nodes
+    """Shape functions of a point in the grid (see :func:`located_weights`) into ``w, wx,
+    wy`` (n_local); returns its nodes (``connectivity``'s row)."""
+    nodes, fx, dfx, fy, dfy = located_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y,
+                                              connectivity)
     n1 = len(marker)
     for i in range(n1):
         for j in range(n1):
@@ -411,7 +409,7 @@ def evaluate_point(px, py, constants, marker, factors_x, table_x, factors_y, tab
         w[k] = value
         wx[k] = slope_x
         wy[k] = slope_y
-    return inside, nodes
+    return nodes
 
 
 @numba.njit(cache=True)
@@ -434,10 +432,10 @@ def shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, fac
     fx, dfx, fy, dfy, w, wx, wy = scratch(factors_x, factors_y, n_local)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        inside, local = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
-                                       connectivity, terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
-        if not inside:
+        if not inside_grid(x[p, 0], x[p, 1], constants):
             return p
+        local = evaluate_point(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y, table_y,
+                               connectivity, terms, term_weights, fx, dfx, fy, dfy, w, wx, wy)
         for k in range(n_local):
             values[p, k] = w[k]
             d_x[p, k] = wx[k]
@@ -615,8 +613,8 @@ def _point_weights(px, py, constants, marker, factors_x, table_x, factors_y, tab
 
     def flat(px, py, constants, marker, factors_x, table_x, factors_y, table_y, topology, form, work):
         q, qx, qy, unused, w, wx, wy = work
-        inside, nodes = evaluate_point(px, py, constants, marker, factors_x, table_x, factors_y, table_y, topology,
-                                       form[0], form[1], q, qx, qy, unused, w, wx, wy)
+        nodes = evaluate_point(px, py, constants, marker, factors_x, table_x, factors_y, table_y, topology,
+                               form[0], form[1], q, qx, qy, unused, w, wx, wy)
         return nodes, w, wx, wy
     return flat
 
@@ -707,9 +705,9 @@ def tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y
 
 @numba.njit(cache=True, inline="always")
 def inside_grid(px, py, constants):
-    """Whether a point lies in the grid (False for NaN): P2G's test of every point,
-    before its weights (a test first and a return was ~1 ns per point faster than
-    weights at a safe cell and a select)."""
+    """Whether a point lies in the grid (False for NaN): the test of every point, before
+    its weights, in P2G and the shape-function matrices (a test first and a return was
+    ~1 ns per point faster than weights at a safe cell and a select)."""
     return px >= constants[0] and px <= constants[2] and py >= constants[1] and py <= constants[3]
 
 
@@ -733,20 +731,6 @@ def located_weights(px, py, constants, marker, factors_x, table_x, factors_y, ta
     return cell_nodes(topology, ix, iy, n_y, marker), fx, dfx, fy, dfy
 
 
-@numba.njit(cache=True, inline="always")
-def tensor_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y, topology):
-    """``(inside, nodes, fx, dfx, fy, dfy)``: :func:`located_weights` of any point and
-    whether it is in the grid; outside (or NaN), the nodes and factors of the grid's
-    lower corner (never read)."""
-    lower_x, lower_y, upper_x, upper_y = constants[0], constants[1], constants[2], constants[3]
-    inside = px >= lower_x and px <= upper_x and py >= lower_y and py <= upper_y
-    if not inside:  # a safe cell: NaN or far-away coordinates would index the tables out of bounds
-        px, py = lower_x, lower_y
-    nodes, fx, dfx, fy, dfy = located_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y,
-                                              topology)
-    return inside, nodes, fx, dfx, fy, dfy
-
-
 @numba.njit(cache=True)
 def tensor_shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
                                numbering, order, values, d_x, d_y, nodes):
@@ -754,10 +738,10 @@ def tensor_shape_function_data(x, marker, geometry, n_elements, factors_x, table
     n1 = len(marker)
     constants = tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform)
     for p in range(x.shape[0]):
-        inside, local, fx, dfx, fy, dfy = tensor_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x,
-                                                         factors_y, table_y, numbering)
-        if not inside:
+        if not inside_grid(x[p, 0], x[p, 1], constants):
             return p
+        local, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x,
+                                                  factors_y, table_y, numbering)
         for i in range(n1):
             for j in range(n1):
                 k = order[i * n1 + j]
