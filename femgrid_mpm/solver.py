@@ -194,7 +194,7 @@ class Simulation:
             blend=solver.blend,
             preconditioner=tensor_preconditioner(self.grid),
             lattice=None if self.grid.nonnegative else self.grid.lattice_indices,
-            layer_width=self.grid.cells[0] // self.grid.discretization.n_elements[0],
+            layer_width=round(self.grid.discretization.element_width / self.grid.spacing),  # in lattice steps
         )
 
     def _time_step(self) -> float:
