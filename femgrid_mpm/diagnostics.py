@@ -9,8 +9,9 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
+
+from .kernels.compiled import compiled
 
 
 class SimulationStopped(RuntimeError):
@@ -180,7 +181,7 @@ class EnergyGuard:
         )
 
 
-@numba.njit(cache=True)
+@compiled()
 def points_kinetic_energy(mass: np.ndarray, velocity: np.ndarray) -> float:
     """``1/2 sum m_p v_p.v_p`` in one compiled pass (for the guard; the energy
     records use :func:`femgrid_mpm.energy.kinetic_energy`)."""

@@ -57,12 +57,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .kernels.arithmetic import fused
+from .kernels.compiled import compiled
 
 #: largest number of active nodes for which "auto" factors the matrix
 DIRECT_LIMIT = 5000
@@ -788,7 +788,7 @@ def _absolute_mass(N: sp.csr_matrix, m_p: np.ndarray, lumped: np.ndarray) -> np.
     return sp.csr_matrix((np.abs(N.data), N.indices, N.indptr), shape=N.shape).T @ m_p
 
 
-@numba.njit(cache=True)
+@compiled()
 def _lumped_inverse(lumped, absolute, reference_mass, inverse, active):
     """:func:`_active` and ``1 / m_i`` on the active nodes, from the sums; returns the
     smallest ``m_i`` (for the negative-mass check, which would otherwise pass over them again)."""
@@ -800,7 +800,7 @@ def _lumped_inverse(lumped, absolute, reference_mass, inverse, active):
     return smallest
 
 
-@numba.njit(cache=True)
+@compiled()
 def _scaled_rows(rhs, inverse):
     """``rhs * inverse[:, None]`` into a new array (numpy's broadcasting cost ~1 us a step)."""
     out = np.empty_like(rhs)
@@ -810,7 +810,7 @@ def _scaled_rows(rhs, inverse):
     return out
 
 
-@numba.njit(cache=True)
+@compiled()
 def _lumped_velocity(relative_momentum, inverse, lumped, frame_velocity, momentum, velocity):
     """``p_rel + m v_ref`` and ``p_rel / m + v_ref``, as numpy would compute them."""
     for i in range(len(inverse)):
@@ -824,7 +824,7 @@ def _lumped_velocity(relative_momentum, inverse, lumped, frame_velocity, momentu
 GUESS_LUMPED, GUESS_LAST, GUESS_EXTRAPOLATED, GUESS_ADVANCED = range(4)
 
 
-@numba.njit(cache=True)
+@compiled()
 def _guess(mode, rhs, lumped, tiny, inverse_diagonal, first, second, dt, shift, columns, excluded):
     """CG's first guess on the system's columns (one pass; numpy's where-chains took ~0.5 ms
     a solve at 27,000 nodes).  ``first``/``second``: the last and the older solution
@@ -862,7 +862,7 @@ def _guess(mode, rhs, lumped, tiny, inverse_diagonal, first, second, dt, shift, 
     return guess
 
 
-@numba.njit(cache=True)
+@compiled()
 def _rows_touching(indptr, indices, marked):
     """The rows of marked nodes and of their neighbours, on a structurally symmetric
     pattern with every diagonal entry (the neighbours are the marked rows' columns)."""
@@ -874,7 +874,7 @@ def _rows_touching(indptr, indices, marked):
     return touched
 
 
-@numba.njit(cache=True)
+@compiled()
 def _lump_couplings_in_place(indptr, indices, data, diagonal_index, weak):
     """:func:`_lump_couplings` keeping the structure (moved entries become explicit zeros).
 
@@ -894,7 +894,7 @@ def _lump_couplings_in_place(indptr, indices, data, diagonal_index, weak):
                 data[entry] = 0.0
 
 
-@numba.njit(cache=True)
+@compiled()
 def _exclude_in_place(indptr, indices, data, diagonal_index, excluded):
     """``keep M keep + diag(excluded)`` in ``data`` itself, on a structure with every
     diagonal entry, returning what it overwrote, ``(positions, rows, old)``: every
@@ -930,7 +930,7 @@ def _exclude_in_place(indptr, indices, data, diagonal_index, excluded):
     return positions[:count], rows[:count], old[:count]
 
 
-@numba.njit(cache=True)
+@compiled()
 def _unexcluded_product(product, excluded, indices, positions, rows, old, vector):
     """``M @ vector`` from ``product = R @ vector`` (R: M with the excluded rows and columns
     made identity) and the entries the exclusion overwrote (:func:`_exclude_in_place`):
@@ -947,7 +947,7 @@ def _unexcluded_product(product, excluded, indices, positions, rows, old, vector
     return product
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _row_times_dense(indptr, indices, data, x, i):
     """Row i of ``A @ x`` for x of shape (n, 2), as four partial sums per column:
     the sums of a row (49 entries for cubic splines) are chains of dependent
@@ -984,7 +984,7 @@ def _row_times_dense(indptr, indices, data, x, i):
     return (a0 + a1) + (a2 + a3), (b0 + b1) + (b2 + b3)
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _precondition(r, z, use_tensor, inverse_diagonal, scale, excluded, factor_x, factor_y):
     """``z = P^-1 r``: the splines' tensor Gram preconditioner, or Jacobi."""
     if use_tensor:
@@ -995,7 +995,7 @@ def _precondition(r, z, use_tensor, inverse_diagonal, scale, excluded, factor_x,
                 z[i, c] = inverse_diagonal[i] * r[i, c]
 
 
-@numba.njit(cache=True)
+@compiled()
 def _csr_times_dense_dot(indptr, indices, data, x, out, dot):
     """``out = A @ x`` and ``dot[c] = x[:, c] . out[:, c]`` in one pass (x of shape (n, k))."""
     dot[:] = 0.0
@@ -1016,7 +1016,7 @@ def _csr_times_dense_dot(indptr, indices, data, x, out, dot):
                 dot[c] = fused(x[i, c], total, dot[c])
 
 
-@numba.njit(cache=True)
+@compiled()
 def _symmetric_times_dense_dot(indptr, indices, data, upper_start, x, out, dot):
     """:func:`_csr_times_dense_dot` of a symmetric matrix from one entry of each pair.
 
@@ -1078,7 +1078,7 @@ def _symmetric_times_dense_dot(indptr, indices, data, upper_start, x, out, dot):
             dot[c] = fused(x[i, c], out[i, c], dot[c])
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _product_dot(indptr, indices, data, upper_start, x, out, dot):
     """``out = A @ x`` and the dots ``x . out``: from one half when ``upper_start`` is given
     (a symmetric stencil-ordered matrix), else row by row."""
@@ -1088,7 +1088,7 @@ def _product_dot(indptr, indices, data, upper_start, x, out, dot):
         _csr_times_dense_dot(indptr, indices, data, x, out, dot)
 
 
-@numba.njit(cache=True)
+@compiled()
 def _transpose_times_dense(indptr, indices, data, y, n_columns):
     """``A.T @ y`` for a CSR matrix A of shape (len(y), n_columns) and y of shape (len(y), k)."""
     out = np.zeros((n_columns, y.shape[1]))
@@ -1100,7 +1100,7 @@ def _transpose_times_dense(indptr, indices, data, y, n_columns):
     return out
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _all_within(residual, target):
     """Whether every column's squared residual norm is within its target norm."""
     for c in range(residual.shape[0]):
@@ -1109,7 +1109,7 @@ def _all_within(residual, target):
     return True
 
 
-@numba.njit(cache=True)
+@compiled()
 def _compiled_cg(indptr, indices, data, upper_start, b, x0, inverse_diagonal, rtol, max_iterations,
                  use_tensor, scale, excluded, factor_x, factor_y):
     """:func:`_preconditioned_cg` compiled, for one or two columns (the same steps).
@@ -1331,7 +1331,7 @@ def tensor_preconditioner(grid) -> TensorPreconditioner | None:
 _NO_TENSOR = (False, np.zeros(1), np.zeros(1, dtype=bool), np.zeros((4, 1)), np.zeros((4, 1)))
 
 
-@numba.njit(cache=True)
+@compiled()
 def _banded_sweeps(factor, values, count, n_lines):
     """Solve ``U^T U z = values`` in place on ``n_lines`` independent lattice lines
     at once (U upper banded, bandwidth 3, ``factor[3 + i - j, j] = U[i, j]``):
@@ -1363,7 +1363,7 @@ def _banded_sweeps(factor, values, count, n_lines):
             values[row + line] = total * inverse[i]
 
 
-@numba.njit(cache=True)
+@compiled()
 def _apply_tensor(r, out, scale, excluded, factor_x, factor_y):
     """``out = S^-1 (K_x ⊗ K_y)^-1 S^-1 r`` on kept nodes, ``r`` on excluded ones
     (node ``ix * n_y + iy``)."""
@@ -1424,7 +1424,7 @@ def _lump_couplings(matrix: sp.csr_matrix, weak: np.ndarray) -> sp.csr_matrix:
     return (kept + sp.diags(to_diagonal)).tocsr()
 
 
-@numba.njit(cache=True)
+@compiled()
 def _cg_advance(x, r, p, Ap, alpha, residual):
     """``x += alpha p``, ``r -= alpha Ap`` column by column; ``residual`` gets ``r.r``."""
     residual[:] = 0.0
@@ -1435,7 +1435,7 @@ def _cg_advance(x, r, p, Ap, alpha, residual):
             residual[c] += r[i, c] * r[i, c]
 
 
-@numba.njit(cache=True)
+@compiled()
 def _cg_direction(p, z, beta):
     """``p = z + beta p`` column by column, in place."""
     for i in range(p.shape[0]):
@@ -1443,7 +1443,7 @@ def _cg_direction(p, z, beta):
             p[i, c] = z[i, c] + beta[c] * p[i, c]
 
 
-@numba.njit(cache=True)
+@compiled()
 def _column_dots(a, b):
     """``a[:, c] . b[:, c]`` for each column (numpy's einsum took ~100 us for (27225, 2))."""
     out = np.zeros(a.shape[1])

@@ -27,6 +27,7 @@ import numpy as np
 
 from ..bases import LocalPolynomials, TensorSplines
 from .arithmetic import fused
+from .compiled import compiled
 
 
 @dataclass(frozen=True)
@@ -383,7 +384,7 @@ def _skeleton_terms(local: LocalPolynomials):
 # -- kernels -------------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def evaluate_point(px, py, constants, marker, factors_x, table_x, factors_y, table_y, connectivity, terms,
                    term_weights, q, qx, qy, unused, w, wx, wy):
     """Shape functions of a point in the grid (see :func:`located_weights`) into ``w, wx,
@@ -412,7 +413,7 @@ def evaluate_point(px, py, constants, marker, factors_x, table_x, factors_y, tab
     return nodes
 
 
-@numba.njit(cache=True)
+@compiled()
 def scratch(factors_x, factors_y, n_local):
     """Per-point work arrays for :func:`evaluate_point`."""
     n = factors_x.shape[1] * factors_y.shape[1]
@@ -420,7 +421,7 @@ def scratch(factors_x, factors_y, n_local):
             np.empty(n_local))
 
 
-@numba.njit(cache=True)
+@compiled()
 def shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
                         connectivity, values, d_x, d_y, nodes):
     """``N, dNdx, dNdy`` of every point as fixed-width rows (n, n_local), and their nodes.
@@ -668,14 +669,15 @@ def _numbering_source(n1: int, shared_step: bool) -> str:
     """Source of :func:`cell_nodes` for a numbering of ``n1 x n1`` slots: the cell's
     first node (one per column of slots if their steps along y differ), then one
     addition per slot."""
-    lines = ["def computed(topology, ix, iy, n_y, marker):", "    along_x = ix * topology[0]"]
+    lines = ["def computed(topology, ix, iy, n_y, marker):", "    along_x = np.uint64(ix) * np.uint64(topology[0])",
+             "    row = np.uint64(iy)"]
     if shared_step:
-        lines.append("    first = along_x + iy * topology[1]")
+        lines.append("    first = along_x + row * np.uint64(topology[1])")
         lines += [f"    column_{i} = first" for i in range(n1)]
     else:
-        lines += [f"    column_{i} = along_x + iy * topology[{1 + i}]" for i in range(n1)]
+        lines += [f"    column_{i} = along_x + row * np.uint64(topology[{1 + i}])" for i in range(n1)]
     offsets = 2 if shared_step else 1 + n1
-    slots = ", ".join(f"column_{s // n1} + topology[{offsets + s}]" for s in range(n1 * n1))
+    slots = ", ".join(f"column_{s // n1} + np.uint64(topology[{offsets + s}])" for s in range(n1 * n1))
     lines.append(f"    return ({slots},)")
     return "\n".join(lines)
 
@@ -686,14 +688,14 @@ def _cell_nodes(topology, ix, iy, n_y, marker):
         def read(topology, ix, iy, n_y, marker):
             return topology[ix * np.int64(n_y) + iy]
         return read
-    namespace: dict = {}
+    namespace: dict = {"np": np}
     n1 = len(marker.types)
     shared_step = len(topology) == 2 + n1 * n1
     exec(_numbering_source(n1, shared_step), namespace)  # noqa: S102 - generated from integers only
     return namespace["computed"]
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform):
     """What every point of a tensor kernel needs, loaded once before the loop over points
     (locals stay in registers; array reads would be repeated per point, as the
@@ -703,7 +705,7 @@ def tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y
             load_table(factors_x, table_x[uniform[0]], marker), load_table(factors_y, table_y[uniform[2]], marker))
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def inside_grid(px, py, constants):
     """Whether a point lies in the grid (False for NaN): the test of every point, before
     its weights, in P2G and the shape-function matrices (a test first and a return was
@@ -711,7 +713,7 @@ def inside_grid(px, py, constants):
     return px >= constants[0] and px <= constants[2] and py >= constants[1] and py <= constants[3]
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def located_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y, topology):
     """Nodes (:func:`cell_nodes`) and the 1D factors ``(fx, dfx, fy, dfy)`` of a point in the grid.
 
@@ -731,7 +733,7 @@ def located_weights(px, py, constants, marker, factors_x, table_x, factors_y, ta
     return cell_nodes(topology, ix, iy, n_y, marker), fx, dfx, fy, dfy
 
 
-@numba.njit(cache=True)
+@compiled()
 def tensor_shape_function_data(x, marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
                                numbering, order, values, d_x, d_y, nodes):
     """:func:`shape_function_data` for tensor bases, in the grid's local order."""

@@ -20,6 +20,7 @@ import numpy as np
 from numba import prange
 from numba.extending import overload
 
+from .compiled import compiled
 from .transfer import (local_g2p, local_linear_elastic_stress_and_force, local_p2g_sums, tensor_g2p,
                        tensor_linear_elastic_stress_and_force, tensor_p2g_sums)
 
@@ -106,12 +107,12 @@ def _g2p_chunk_kernel(x, v, density_p, acceleration, v_ref, dt, start_motion, hr
     return folded
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _bounds(chunk, n_chunks, n):
     return chunk * n // n_chunks, (chunk + 1) * n // n_chunks
 
 
-@numba.njit(cache=True)
+@compiled()
 def _sum_parts(parts, out):
     """``out = sum_c parts[c]`` in chunk order (serial: one parallel region per kernel)."""
     flat_out = out.reshape(-1)
@@ -123,7 +124,7 @@ def _sum_parts(parts, out):
         flat_out[i] = total
 
 
-@numba.njit(cache=True, parallel=True)
+@compiled(parallel=True)
 def parallel_p2g(x, v, mass_p, density_p, v_ref, signed, hrz,
                  marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, topology,
                  grid_mass, grid_absolute, momentum, mass_parts, absolute_parts, momentum_parts):
@@ -150,7 +151,7 @@ def parallel_p2g(x, v, mass_p, density_p, v_ref, signed, hrz,
     return -1
 
 
-@numba.njit(cache=True, parallel=True)
+@compiled(parallel=True)
 def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
                               topology, strain, stress, force, start_motion, force_parts, relative_parts):
@@ -173,7 +174,7 @@ def parallel_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_
     return total
 
 
-@numba.njit(cache=True, parallel=True)
+@compiled(parallel=True)
 def parallel_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
                  marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, topology,
                  n_chunks):

@@ -39,15 +39,15 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from .arithmetic import fused
+from .compiled import compiled
 from .basis import (function_slots, inside_grid, located_weights, point_weights, point_work, squares,
                     tensor_constants)
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _relative_velocity(velocity, v_ref, relative):
     """``v_I - v_ref``: the grid velocity in the step's frame (after the constraints)."""
     for i in range(velocity.shape[0]):
@@ -55,7 +55,7 @@ def _relative_velocity(velocity, v_ref, relative):
         relative[i, 1] = velocity[i, 1] - v_ref[1]
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _hand_over(p, divergence, ux, uy, start_motion):
     """What the force pass knows of point p's motion at the step's start and G2P
     needs (:func:`_move_point`): ``div v`` and ``N @ v_rel``, whose inner sums
@@ -65,7 +65,7 @@ def _hand_over(p, divergence, ux, uy, start_motion):
     start_motion[p, 2] = uy
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, body, strain, stress, start_motion):
     """Paper Eqs. 18 and 6 for point ``p``: strain increment from its velocity
     gradient, the incremental linear elastic stress; ``div v`` and the
@@ -90,14 +90,14 @@ def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, b
     return s_xx, s_yy, s_xy
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _mirror(matrix, mirror_target, mirror_source):
     """The assembled mass matrix's lower half (stencil order) from its upper half."""
     for t in range(mirror_target.shape[0]):
         matrix[mirror_target[t]] = matrix[mirror_source[t]]
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _clear_sums(absolute, want_volume, assemble, grid_mass, momentum, grid_absolute, grid_volume, matrix):
     """Zero what a P2G pass sums into: mass, momentum and what it is asked for."""
     grid_mass[:] = 0.0
@@ -110,7 +110,7 @@ def _clear_sums(absolute, want_volume, assemble, grid_mass, momentum, grid_absol
         matrix[:] = 0.0
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, strain_increment, gradient_increment,
                      start_motion):
     """Eq. 18 for any material: point p's strain increment (added to its strain)
@@ -131,7 +131,7 @@ def _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, stra
 SERIES_BOUND = 2.0**-7
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def density_factor(a):
     """``exp(a)`` for Eq. 21's ``a = -dt div v``, within 1 ulp of ``math.exp``.
 
@@ -148,7 +148,7 @@ def density_factor(a):
     return math.exp(a)
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion):
     """Eqs. 19-21 for point p from its interpolated acceleration (ax, ay) and what
     the force pass interpolated (``start_motion[p]``: ``div v`` and the relative
@@ -170,7 +170,7 @@ def _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion):
 # once per form.
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _local_gradient(nodes, count, skip, relative, w, wx, wy):
     """``dNdx @ v_rel``, ``dNdy @ v_rel`` and ``N @ v_rel`` at one point:
     (d vx/dx, d vy/dx, d vx/dy, d vy/dy, vx, vy)."""
@@ -195,7 +195,7 @@ def _local_gradient(nodes, count, skip, relative, w, wx, wy):
     return dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _local_force(nodes, count, skip, wx, wy, w_xx, w_yy, w_xy, force):
     """One point's share of Eq. 11, ``-V sigma grad N``, scattered to its nodes."""
     for k in range(count):
@@ -206,7 +206,7 @@ def _local_force(nodes, count, skip, wx, wy, w_xx, w_yy, w_xy, force):
         force[node, 1] = fused(-wx[k], w_xy, fused(-wy[k], w_yy, force[node, 1]))
 
 
-@numba.njit(cache=True)
+@compiled()
 def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, topology,
               grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, centre,
@@ -285,7 +285,7 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
     return -1
 
 
-@numba.njit(cache=True)
+@compiled()
 def local_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                                           marker, geometry, n_elements, factors_x, table_x, factors_y, table_y,
                                           uniform, form, topology, strain, stress, force, start_motion):
@@ -312,7 +312,7 @@ def local_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass
     return total
 
 
-@numba.njit(cache=True)
+@compiled()
 def local_velocity_gradient(x, velocity, v_ref, relative, dt,
                             marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
                             topology, strain, strain_increment, gradient_increment, start_motion):
@@ -328,7 +328,7 @@ def local_velocity_gradient(x, velocity, v_ref, relative, dt,
         _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, strain_increment, gradient_increment, start_motion)
 
 
-@numba.njit(cache=True)
+@compiled()
 def local_internal_force(x, mass_p, density_p, stress,
                          marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form,
                          topology, force):
@@ -348,7 +348,7 @@ def local_internal_force(x, mass_p, density_p, stress,
     return total
 
 
-@numba.njit(cache=True)
+@compiled()
 def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
               marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, topology):
     """Eqs. 19-21: point velocity from the grid acceleration, position from the
@@ -397,7 +397,7 @@ def local_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
 # along the lattice, see :func:`.basis.lattice_numbering`), not read.
 
 
-@numba.njit(cache=True)
+@compiled()
 def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, topology,
                grid_mass, grid_absolute, grid_volume, momentum, indptr, rank, complete, slots, centre,
@@ -498,13 +498,13 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
     return -1
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _no_pattern():
     """Stand-ins for the mass pattern's arrays when no matrix is assembled (never read)."""
     return np.zeros(2, np.int32), np.zeros((1, 1), np.int32), np.zeros(1, np.bool_), np.zeros(0, np.int32), np.zeros(1)
 
 
-@numba.njit(cache=True)
+@compiled()
 def tensor_p2g_sums(x, v, mass_p, density_p, v_ref, signed, want_volume, hrz,
                     marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, topology,
                     grid_mass, grid_absolute, grid_volume, momentum):
@@ -516,7 +516,7 @@ def tensor_p2g_sums(x, v, mass_p, density_p, v_ref, signed, want_volume, hrz,
                       grid_volume, momentum, index, table, flags, table, 0, False, mirror, mirror, matrix)
 
 
-@numba.njit(cache=True)
+@compiled()
 def local_p2g_sums(x, v, mass_p, density_p, v_ref, signed, want_volume, hrz,
                    marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, form, topology,
                    grid_mass, grid_absolute, grid_volume, momentum):
@@ -527,7 +527,7 @@ def local_p2g_sums(x, v, mass_p, density_p, v_ref, signed, want_volume, hrz,
                      grid_volume, momentum, index, table, flags, table, 0, False, mirror, mirror, matrix)
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _tensor_gradient(nodes, fx, dfx, fy, dfy, n1, relative):
     """``dNdx @ v_rel``, ``dNdy @ v_rel`` and ``N @ v_rel`` of one point:
     (dvx/dx, dvy/dx, dvx/dy, dvy/dy, vx, vy); the last two reuse the inner sums."""
@@ -559,7 +559,7 @@ def _tensor_gradient(nodes, fx, dfx, fy, dfy, n1, relative):
     return dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _tensor_force(nodes, fx, dfx, fy, dfy, n1, w_xx, w_yy, w_xy, force):
     """Scatter ``-(dNdx (V s_xx, V s_xy) + dNdy (V s_xy, V s_yy))`` of one point."""
     for i in range(n1):
@@ -573,7 +573,7 @@ def _tensor_force(nodes, fx, dfx, fy, dfy, n1, w_xx, w_yy, w_xy, force):
             force[node, 1] = fused(fy[j], d_xy, fused(dfy[j], d_yy, force[node, 1]))
 
 
-@numba.njit(cache=True)
+@compiled()
 def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass_p, density_p, body, lame,
                                            marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
                                            topology, strain, stress, force, start_motion):
@@ -595,7 +595,7 @@ def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mas
     return total
 
 
-@numba.njit(cache=True)
+@compiled()
 def tensor_velocity_gradient(x, velocity, v_ref, relative, dt,
                              marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, topology,
                              strain, strain_increment, gradient_increment, start_motion):
@@ -610,7 +610,7 @@ def tensor_velocity_gradient(x, velocity, v_ref, relative, dt,
         _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, strain_increment, gradient_increment, start_motion)
 
 
-@numba.njit(cache=True)
+@compiled()
 def tensor_internal_force(x, mass_p, density_p, stress,
                           marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, topology,
                           force):
@@ -629,7 +629,7 @@ def tensor_internal_force(x, mass_p, density_p, stress,
     return total
 
 
-@numba.njit(cache=True)
+@compiled()
 def tensor_g2p(x, v, density_p, acceleration, v_ref, dt, start_motion, hrz,
                marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, topology):
     """:func:`local_g2p` for tensor-product bases."""

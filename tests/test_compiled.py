@@ -1,0 +1,79 @@
+"""The kernels' disk cache follows every module a kernel inlines (:mod:`femgrid_mpm.kernels.compiled`).
+
+numba alone checks a cached kernel against its own file, so an edit of an
+inlined helper in another file would load the old machine code.  These tests
+build a two-module package in a temporary directory, run its kernel in fresh
+processes, and edit the helper between the runs.
+"""
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+from femgrid_mpm.kernels.compiled import PREFIX, fingerprint
+
+
+def _write_package(root: Path, value: float, note: str = "") -> None:
+    package = root / "inlining"
+    package.mkdir(exist_ok=True)
+    (package / "__init__.py").write_text("")
+    (package / "helpers.py").write_text(textwrap.dedent(f"""
+        from femgrid_mpm.kernels.compiled import compiled
+
+        @compiled(inline="always")
+        def constant():
+            return {value!r}
+        """))
+    (package / "kernels.py").write_text(textwrap.dedent("""
+        from femgrid_mpm.kernels.compiled import compiled
+        from .helpers import constant
+
+        @compiled()
+        def kernel(x):
+            return x * constant()
+        """))
+    (package / "notes.py").write_text(f"TEXT = {note!r}\n")  # mentions neither numba nor the decorator
+
+
+def _run_kernel(root: Path, cache: Path) -> tuple[float, bool]:
+    """The kernel's value at 1.0 in a fresh process, and whether it was loaded from the cache."""
+    program = ("from inlining.kernels import kernel; value = kernel(1.0); "
+               "print(value, bool(kernel.stats.cache_hits))")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(root))
+    result = subprocess.run([sys.executable, "-c", program], env=env, capture_output=True, text=True, check=True)
+    value, hit = result.stdout.split()
+    return float(value), hit == "True"
+
+
+def test_an_edit_of_an_inlined_helper_recompiles_the_kernel(tmp_path):
+    cache = tmp_path / "cache"
+    _write_package(tmp_path, 1.0)
+    assert _run_kernel(tmp_path, cache) == (1.0, False)  # compiled
+    assert _run_kernel(tmp_path, cache) == (1.0, True)   # loaded
+    _write_package(tmp_path, 2.0)  # kernels.py unchanged: plain numba would load 1.0 here
+    assert _run_kernel(tmp_path, cache) == (2.0, False)
+    assert _run_kernel(tmp_path, cache) == (2.0, True)
+    assert len(list((cache / "inlining").glob(PREFIX + "*"))) == 2
+
+
+def test_the_fingerprint_covers_the_modules_that_compile_and_only_them(tmp_path):
+    _write_package(tmp_path, 1.0, note="first")
+    root = tmp_path / "inlining"
+    first = fingerprint(root)
+    _write_package(tmp_path, 1.0, note="second")  # a module without kernels changed
+    assert fingerprint(root) == first
+    _write_package(tmp_path, 3.0, note="second")
+    assert fingerprint(root) != first
+    assert len(first) == 16
+
+
+def test_the_library_kernels_use_the_fingerprinted_directory():
+    from femgrid_mpm.kernels import transfer
+
+    import femgrid_mpm.mass as mass
+
+    for kernel in (transfer.tensor_p2g_sums, transfer.local_g2p, mass._compiled_cg):
+        directory = Path(kernel._cache._cache_path).parent
+        assert directory.name == PREFIX + fingerprint(Path(transfer.__file__).parents[1])
