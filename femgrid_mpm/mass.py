@@ -952,7 +952,12 @@ def _row_times_dense(indptr, indices, data, x, i):
     """Row i of ``A @ x`` for x of shape (n, 2), as four partial sums per column:
     the sums of a row (49 entries for cubic splines) are chains of dependent
     additions in strict IEEE arithmetic, and one chain per column left the
-    product bound by the adder's latency (partial sums: 25% faster)."""
+    product bound by the adder's latency (partial sums: 25% faster).
+
+    Positions and column indices are taken as unsigned: numba tests a signed
+    index for Python's negative wraparound on every access, and without the
+    tests the consistent steps at 1e5 points ran 9-11% faster (q1 147 -> 131,
+    q2 300 -> 265, cubic splines 500 -> 455 ns; with the assembly's, below)."""
     a0 = 0.0
     a1 = 0.0
     a2 = 0.0
@@ -961,11 +966,13 @@ def _row_times_dense(indptr, indices, data, x, i):
     b1 = 0.0
     b2 = 0.0
     b3 = 0.0
-    entry = indptr[i]
-    stop = indptr[i + 1]
-    while entry + 4 <= stop:
-        j0, j1, j2, j3 = indices[entry], indices[entry + 1], indices[entry + 2], indices[entry + 3]
-        d0, d1, d2, d3 = data[entry], data[entry + 1], data[entry + 2], data[entry + 3]
+    one, two, three, four = np.uint64(1), np.uint64(2), np.uint64(3), np.uint64(4)
+    entry = np.uint64(indptr[i])
+    stop = np.uint64(indptr[i + 1])
+    while entry + three < stop:
+        j0, j1 = np.uint64(indices[entry]), np.uint64(indices[entry + one])
+        j2, j3 = np.uint64(indices[entry + two]), np.uint64(indices[entry + three])
+        d0, d1, d2, d3 = data[entry], data[entry + one], data[entry + two], data[entry + three]
         a0 = fused(d0, x[j0, 0], a0)
         b0 = fused(d0, x[j0, 1], b0)
         a1 = fused(d1, x[j1, 0], a1)
@@ -974,13 +981,13 @@ def _row_times_dense(indptr, indices, data, x, i):
         b2 = fused(d2, x[j2, 1], b2)
         a3 = fused(d3, x[j3, 0], a3)
         b3 = fused(d3, x[j3, 1], b3)
-        entry += 4
+        entry += four
     while entry < stop:
-        j = indices[entry]
+        j = np.uint64(indices[entry])
         d = data[entry]
         a0 = fused(d, x[j, 0], a0)
         b0 = fused(d, x[j, 1], b0)
-        entry += 1
+        entry += one
     return (a0 + a1) + (a2 + a3), (b0 + b1) + (b2 + b3)
 
 
@@ -1040,11 +1047,12 @@ def _symmetric_times_dense_dot(indptr, indices, data, upper_start, x, out, dot):
             b0 = data[diagonal] * xi1
             a1 = 0.0
             b1 = 0.0
-            entry = diagonal + 1
-            stop = indptr[i + 1]
-            while entry + 2 <= stop:
-                j0, j1 = indices[entry], indices[entry + 1]
-                d0, d1 = data[entry], data[entry + 1]
+            one = np.uint64(1)
+            entry = np.uint64(diagonal) + one
+            stop = np.uint64(indptr[i + 1])
+            while entry + one < stop:
+                j0, j1 = np.uint64(indices[entry]), np.uint64(indices[entry + one])
+                d0, d1 = data[entry], data[entry + one]
                 a0 = fused(d0, x[j0, 0], a0)
                 b0 = fused(d0, x[j0, 1], b0)
                 a1 = fused(d1, x[j1, 0], a1)
@@ -1053,9 +1061,9 @@ def _symmetric_times_dense_dot(indptr, indices, data, upper_start, x, out, dot):
                 out[j0, 1] = fused(d0, xi1, out[j0, 1])
                 out[j1, 0] = fused(d1, xi0, out[j1, 0])
                 out[j1, 1] = fused(d1, xi1, out[j1, 1])
-                entry += 2
+                entry += np.uint64(2)
             if entry < stop:
-                j0 = indices[entry]
+                j0 = np.uint64(indices[entry])
                 d0 = data[entry]
                 a0 = fused(d0, x[j0, 0], a0)
                 b0 = fused(d0, x[j0, 1], b0)

@@ -278,7 +278,7 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
                     for j in range(count):
                         slot = slots[k, j]
                         if j != skip and slot >= centre:
-                            entry = start + (slot if full else rank[node, slot])
+                            entry = np.uint64(start + (slot if full else rank[node, slot]))  # unsigned: no wraparound test
                             matrix[entry] = fused(weighted, w[j], matrix[entry])
     if assemble:
         _mirror(matrix, mirror_target, mirror_source)
@@ -481,17 +481,17 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                     if ordered and full:
                         for k in range(n1):
                             m_ak = m_a * fx[k]
-                            first = start + slots[a, k * n1]
+                            first = np.uint64(start + slots[a, k * n1])
                             for l in range(n1):
                                 if k > i or (k == i and l >= j):
-                                    matrix[first + l] = fused(m_ak, fy[l], matrix[first + l])
+                                    matrix[first + np.uint64(l)] = fused(m_ak, fy[l], matrix[first + np.uint64(l)])
                     else:
                         for k in range(n1):
                             m_ak = m_a * fx[k]
                             for l in range(n1):
                                 slot = slots[a, k * n1 + l]
                                 if slot >= centre:
-                                    entry = start + (slot if full else rank[node, slot])
+                                    entry = np.uint64(start + (slot if full else rank[node, slot]))  # unsigned: no wraparound test
                                     matrix[entry] = fused(m_ak, fy[l], matrix[entry])
     if assemble:
         _mirror(matrix, mirror_target, mirror_source)
