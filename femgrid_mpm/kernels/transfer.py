@@ -77,8 +77,9 @@ def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, b
     strain[p, 0] += e_xx
     strain[p, 1] += e_yy
     strain[p, 2] += e_xy
-    lam = lame[body[p], 0]
-    two_mu = lame[body[p], 1]
+    material = np.uint64(body[p])  # unsigned: no wraparound test
+    lam = lame[material, 0]
+    two_mu = lame[material, 1]
     volumetric = e_xx + e_yy
     s_xx = stress[p, 0] + (lam * volumetric + two_mu * e_xx)
     s_yy = stress[p, 1] + (lam * volumetric + two_mu * e_yy)
