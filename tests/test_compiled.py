@@ -37,12 +37,14 @@ def _write_package(root: Path, value: float, note: str = "") -> None:
     (package / "notes.py").write_text(f"TEXT = {note!r}\n")  # mentions neither numba nor the decorator
 
 
-def _run_kernel(root: Path, cache: Path) -> tuple[float, bool]:
+def _run_kernel(root: Path, cache: Path, stderr: list | None = None) -> tuple[float, bool]:
     """The kernel's value at 1.0 in a fresh process, and whether it was loaded from the cache."""
     program = ("from inlining.kernels import kernel; value = kernel(1.0); "
                "print(value, bool(kernel.stats.cache_hits))")
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(root))
     result = subprocess.run([sys.executable, "-c", program], env=env, capture_output=True, text=True, check=True)
+    if stderr is not None:
+        stderr.append(result.stderr)
     value, hit = result.stdout.split()
     return float(value), hit == "True"
 
@@ -55,7 +57,21 @@ def test_an_edit_of_an_inlined_helper_recompiles_the_kernel(tmp_path):
     _write_package(tmp_path, 2.0)  # kernels.py unchanged: plain numba would load 1.0 here
     assert _run_kernel(tmp_path, cache) == (2.0, False)
     assert _run_kernel(tmp_path, cache) == (2.0, True)
-    assert len(list((cache / "inlining").glob(PREFIX + "*"))) == 2
+    (own,) = cache.iterdir()  # one directory for this package's path
+    assert len(list(own.glob(PREFIX + "*"))) == 2
+
+
+def test_without_a_writable_cache_directory_kernels_compile_in_every_process(tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    cache = blocker / "cache"  # cannot be made: numba's own locators would load stale code here
+    _write_package(tmp_path, 1.0)
+    messages = []
+    assert _run_kernel(tmp_path, cache, messages) == (1.0, False)
+    assert "no writable cache directory" in messages[0]
+    _write_package(tmp_path, 2.0)
+    assert _run_kernel(tmp_path, cache) == (2.0, False)
+    assert not list(tmp_path.rglob("*.nbi"))  # numba's own locators were not used
 
 
 def test_the_fingerprint_covers_the_modules_that_compile_and_only_them(tmp_path):
@@ -67,6 +83,16 @@ def test_the_fingerprint_covers_the_modules_that_compile_and_only_them(tmp_path)
     _write_package(tmp_path, 3.0, note="second")
     assert fingerprint(root) != first
     assert len(first) == 16
+
+
+def test_a_single_module_is_its_own_root(tmp_path):
+    module = tmp_path / "script.py"
+    module.write_text("import numba\n")
+    first = fingerprint(module)
+    (tmp_path / "other.py").write_text("import numba\n")  # a neighbour is not part of it
+    assert fingerprint(module) == first
+    module.write_text("import numba  # edited\n")
+    assert fingerprint(module) != first
 
 
 def test_the_library_kernels_use_the_fingerprinted_directory():

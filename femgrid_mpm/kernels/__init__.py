@@ -18,11 +18,17 @@
               :class:`~.engines.CompiledTransfer` (these kernels), selected by
               ``[solver] engine``.
 
-Every kernel is serial, ``cache=True`` (compiled once per machine, then
-loaded: about 50-57 s the first time for every basis and mass kind) and
-``fastmath=False``, its fused multiply-adds asked for by name
-(:mod:`.arithmetic`): results are reproducible bit for bit from run to run
-and from machine to machine.
+Every kernel is serial, cached on disk (:func:`.compiled.compiled`: compiled
+once per machine and source tree, then loaded: about 50-57 s the first time for
+every basis and mass kind) and ``fastmath=False``, its fused multiply-adds
+asked for by name (:mod:`.arithmetic`): results are reproducible bit for bit
+from run to run and from machine to machine.  Node and entry indices are
+unsigned where they are computed (numba tests signed ones for Python's
+negative wraparound at every access).
 
 ``arithmetic`` ``fused(a, b, c)``, the IEEE 754 fused multiply-add.
+``compiled``   ``numba.njit(cache=True)`` with a cache directory named by a
+              fingerprint of every module a kernel can inline (numba alone
+              checks a kernel's own file: an edit of ``basis.py`` left the
+              transfers compiled from its old text).
 """

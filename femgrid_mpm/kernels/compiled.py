@@ -7,13 +7,20 @@ edit of ``basis.py`` alone numba would load the transfers compiled from its
 old text, silently (seen here: P2G kept an inside-grid test that had been
 edited out of ``basis.py``).  :func:`compiled` therefore caches every kernel in
 a directory named by a fingerprint of all modules of the kernel's package
-that use numba: an edit of any of them gives a new directory and a fresh
-compilation (about a minute for every kernel), an unchanged tree loads in
-about a second.
+that mention numba or this decorator: an edit of any of them gives a new
+directory and a fresh compilation (about a minute for every kernel), an
+unchanged tree loads in about a second.
 
-Where (``cache_directory``): under ``$NUMBA_CACHE_DIR`` if set, else in the
-package's ``__pycache__`` if writable, else in ``$XDG_CACHE_HOME/femgrid-mpm``
-(``~/.cache/femgrid-mpm``); the few most recent fingerprints are kept there.
+Where (:func:`cache_directory`): ``<package>/__pycache__/numba-<fingerprint>``
+if the package's directory is writable, else
+``$XDG_CACHE_HOME/femgrid-mpm/<package>-<path hash>/numba-<fingerprint>``
+(``~/.cache`` without ``XDG_CACHE_HOME``); with ``$NUMBA_CACHE_DIR`` set,
+``$NUMBA_CACHE_DIR/<package>-<path hash>/numba-<fingerprint>``.  Beside the
+current fingerprint the ``KEPT`` most recent ones are kept, and no directory
+used in the last ``KEEP_DAYS`` days is removed (a long run may still write to
+its own).  Where no directory is writable, kernels are compiled in every
+process, with one warning: loading from a cache that cannot be keyed would
+bring back the stale kernels.
 """
 
 from __future__ import annotations
@@ -24,25 +31,32 @@ import os
 import shutil
 import sys
 import tempfile
+import time
+import warnings
 from pathlib import Path
 
 import numba
 
-#: fingerprint directories kept beside the current one (older trees, other checkouts' runs)
+#: fingerprint directories kept beside the current one (older trees, other runs)
 KEPT = 4
+#: and none used this recently is removed, whatever their number
+KEEP_DAYS = 7
 PREFIX = "numba-"
 
 
 def fingerprint(root: Path) -> str:
-    """SHA-256 (16 hex digits) of every ``.py`` file under ``root`` that mentions ``numba``
-    or ``compiled``, with their paths: the modules whose functions (and global
-    constants, which numba freezes) a kernel may compile or inline.  An edit
-    elsewhere (the command line, scene loading) keeps the compiled kernels."""
+    """SHA-256 (16 hex digits) of every ``.py`` file under ``root`` (a package's
+    directory, or one module's file) that mentions ``numba`` or ``compiled``, with
+    their paths: the modules whose functions (and global constants, which numba
+    freezes) a kernel may compile or inline.  An edit elsewhere (the command
+    line, scene loading) keeps the compiled kernels."""
     digest = hashlib.sha256(numba.__version__.encode())
-    for path in sorted(root.rglob("*.py")):
+    files = [root] if root.is_file() else sorted(root.rglob("*.py"))
+    for path in files:
         text = path.read_bytes()
         if b"numba" in text or b"compiled" in text:
-            digest.update(path.relative_to(root).as_posix().encode() + b"\0" + text + b"\0")
+            name = path.name if root.is_file() else path.relative_to(root).as_posix()
+            digest.update(name.encode() + b"\0" + text + b"\0")
     return digest.hexdigest()[:16]
 
 
@@ -55,41 +69,57 @@ def _writable(directory: Path) -> bool:
     return True
 
 
-def _base(root: Path) -> Path:
+def _bases(root: Path) -> list[Path]:
+    """Where the cache may go, in order of preference."""
+    # outside the package, one directory per package path: checkouts do not prune each other
+    own = f"{root.stem}-{hashlib.sha1(str(root).encode()).hexdigest()[:8]}"
     if os.environ.get("NUMBA_CACHE_DIR"):
-        return Path(os.environ["NUMBA_CACHE_DIR"]) / root.name
-    in_tree = root / "__pycache__"
-    if _writable(in_tree):
-        return in_tree
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "femgrid-mpm" / root.name
+        return [Path(os.environ["NUMBA_CACHE_DIR"]) / own]
+    in_tree = (root if root.is_dir() else root.parent) / "__pycache__"
+    user = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "femgrid-mpm" / own
+    return [in_tree, user]
 
 
 def _prune(base: Path, current: Path) -> None:
-    """Keep the ``KEPT`` most recently used fingerprint directories besides ``current``."""
+    """Remove fingerprint directories beyond the ``KEPT`` most recent that are unused
+    for ``KEEP_DAYS``."""
     try:
         others = sorted((d for d in base.glob(PREFIX + "*") if d != current and d.is_dir()),
                         key=lambda d: d.stat().st_mtime, reverse=True)
+        old = time.time() - KEEP_DAYS * 86400
+        stale = [d for d in others[KEPT:] if d.stat().st_mtime < old]
     except OSError:
         return
-    for stale in others[KEPT:]:
-        shutil.rmtree(stale, ignore_errors=True)
+    for directory in stale:
+        shutil.rmtree(directory, ignore_errors=True)
 
 
 @functools.lru_cache(maxsize=None)
-def cache_directory(root: Path) -> Path:
-    """The cache directory of the kernels of the package at ``root`` (made, and old ones pruned)."""
-    base = _base(root)
-    directory = base / (PREFIX + fingerprint(root))
-    if _writable(directory):
-        os.utime(directory)  # most recently used, for the pruning of other processes
-        _prune(base, directory)
-    return directory
+def cache_directory(root: Path) -> Path | None:
+    """The cache directory of the kernels of the package (or module) at ``root``,
+    made, marked as used and with old ones pruned; None if none can be written."""
+    name = PREFIX + fingerprint(root)
+    for base in _bases(root):
+        directory = base / name
+        if _writable(directory):
+            os.utime(directory)  # most recently used, for the pruning of other processes
+            _prune(base, directory)
+            return directory
+    warnings.warn(f"femgrid-mpm: no writable cache directory for the kernels of {root} (tried "
+                  f"{', '.join(str(b) for b in _bases(root))}): they are compiled in every process",
+                  RuntimeWarning, stacklevel=3)
+    return None
 
 
-def _package_root(function) -> Path:
-    top = sys.modules[function.__module__.partition(".")[0]]
-    path = Path(top.__file__).resolve()
-    return path.parent if path.name == "__init__.py" else path.parent
+def _source_root(function) -> Path | None:
+    """The directory of the function's top-level package, or its module's file if that is
+    no package; None for code without a source file (a REPL, a notebook cell)."""
+    top = sys.modules.get(function.__module__.partition(".")[0])
+    source = getattr(top, "__file__", None)
+    if source is None:
+        return None
+    path = Path(source).resolve()
+    return path.parent if path.name == "__init__.py" else path
 
 
 def compiled(**options):
@@ -98,14 +128,22 @@ def compiled(**options):
 
     numba picks a function's cache directory when it is decorated (from
     ``numba.config.CACHE_DIR``); the setting is ours only for that moment, so
-    other numba code in the process keeps its own.
+    other numba code in the process keeps its own.  ``cache=False``, code without
+    a source file (a REPL, a notebook cell) and a tree with no writable cache
+    directory compile in every process.
 
     >>> from femgrid_mpm.kernels import transfer
-    >>> str(cache_directory(_package_root(transfer.density_factor))) in transfer.density_factor._cache._cache_path
+    >>> root = _source_root(transfer.density_factor.py_func)
+    >>> transfer.density_factor._cache._cache_path.startswith(str(cache_directory(root)))
     True
     """
+    cache = options.pop("cache", True)
+
     def decorate(function):
-        directory = cache_directory(_package_root(function))
+        root = _source_root(function) if cache else None
+        directory = cache_directory(root) if root is not None else None
+        if directory is None:
+            return numba.njit(**options)(function)
         previous = numba.config.CACHE_DIR
         numba.config.CACHE_DIR = str(directory)
         try:
