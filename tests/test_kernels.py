@@ -393,3 +393,28 @@ def test_density_factor_is_exp_within_one_ulp():
     np.testing.assert_array_equal(out[:2], [np.inf, 0.0])
     assert np.isnan(out[2]) and out[3] == out[4] == 1.0
     assert abs(out[5] - math.exp(SERIES_BOUND)) <= np.spacing(out[5])
+
+
+@pytest.mark.parametrize("basis", ["q1", "serendipity"])
+def test_a_zero_density_stops_the_run_by_the_finiteness_check(basis):
+    """The passes divide as IEEE 754 does (``kernels.arithmetic.quotient``): a point of zero density
+    has an infinite volume, its force is not finite, and the step stops with the one-line
+    message that names the step and the first point not finite (numba's default raised
+    ZeroDivisionError out of the kernel)."""
+    from femgrid_mpm.diagnostics import SimulationStopped
+
+    scene = Scene.model_validate({
+        "grid": {"basis": basis, "lower": [0, 0], "upper": [8, 8], "spacing": 1.0},
+        "time": {"dt": 1e-3, "end": 1.0},
+        "solver": {"mass": "hrz"},
+        "bodies": [{"name": "block", "lower": [2, 2], "upper": [6, 6], "points_per_cell": 2,
+                    "velocity": ["0.01", "0"], "material": {"E": 1e4, "nu": 0.3, "density": 1e3}}],
+    })
+    simulation = Simulation(scene)
+    simulation.advance()
+    simulation.particles.density[5] = 0.0
+    with pytest.raises(SimulationStopped) as stop:
+        for _ in range(3):
+            simulation.advance()
+    assert stop.value.reason == "not_finite"
+    assert "no longer finite" in str(stop.value) and f"step {stop.value.step}" in str(stop.value)

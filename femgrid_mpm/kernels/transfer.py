@@ -32,7 +32,10 @@ For a tensor basis the weights are themselves products,
 
 Every kernel is serial (``parallel`` variants are separate functions), uses
 ``fastmath=False``, its accumulations fused multiply-adds by name
-(:func:`.arithmetic.fused`), and is cached on disk (``cache=True``).
+(:func:`.arithmetic.fused`), and is cached on disk (:func:`.compiled.compiled`).
+The point volumes ``m / rho`` are :func:`.arithmetic.quotient` (IEEE 754, no
+Python test for a zero divisor: a zero density stops the run by the step's
+finiteness check instead of a ZeroDivisionError out of a kernel).
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ import math
 
 import numpy as np
 
-from .arithmetic import fused
+from .arithmetic import fused, quotient
 from .compiled import compiled
 from .basis import (function_slots, inside_grid, located_weights, point_weights, point_work, squares,
                     tensor_constants)
@@ -264,7 +267,7 @@ def local_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hrz
                     momentum[node, 0] = fused(w[k], px, momentum[node, 0])
                     momentum[node, 1] = fused(w[k], py, momentum[node, 1])
         if want_volume:
-            volume = m / density_p[p]
+            volume = quotient(m, density_p[p])
             for k in range(count):
                 if k != skip:
                     node = nodes[k]
@@ -308,7 +311,7 @@ def local_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mass
         s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, body, strain, stress,
                                                  start_motion)
         total += s_xx + s_yy + s_xy
-        volume = mass_p[p] / density_p[p]
+        volume = quotient(mass_p[p], density_p[p])
         _local_force(nodes, count, skip, wx, wy, volume * s_xx, volume * s_yy, volume * s_xy, force)
     return total
 
@@ -342,7 +345,7 @@ def local_internal_force(x, mass_p, density_p, stress,
     for p in range(x.shape[0]):
         nodes, w, wx, wy = point_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
                                          table_y, topology, form, work)
-        volume = mass_p[p] / density_p[p]
+        volume = quotient(mass_p[p], density_p[p])
         total += stress[p, 0] + stress[p, 1] + stress[p, 2]
         _local_force(nodes, count, skip, wx, wy, volume * stress[p, 0], volume * stress[p, 1],
                      volume * stress[p, 2], force)
@@ -465,7 +468,7 @@ def tensor_p2g(x, v, mass_p, density_p, v_ref, signed, want_volume, assemble, hr
                     momentum[node, 0] = fused(px_i, fy[j], momentum[node, 0])
                     momentum[node, 1] = fused(py_i, fy[j], momentum[node, 1])
         if want_volume:
-            volume = m / density_p[p]
+            volume = quotient(m, density_p[p])
             for i in range(n1):
                 v_i = fx[i] * volume
                 for j in range(n1):
@@ -590,7 +593,7 @@ def tensor_linear_elastic_stress_and_force(x, velocity, v_ref, relative, dt, mas
         dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy = _tensor_gradient(nodes, fx, dfx, fy, dfy, n1, relative)
         s_xx, s_yy, s_xy = _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, body, strain, stress, start_motion)
         total += s_xx + s_yy + s_xy
-        volume = mass_p[p] / density_p[p]
+        volume = quotient(mass_p[p], density_p[p])
         _tensor_force(nodes, fx, dfx, fy, dfy, n1, volume * s_xx, volume * s_yy, volume * s_xy,
                       force)
     return total
@@ -623,7 +626,7 @@ def tensor_internal_force(x, mass_p, density_p, stress,
     for p in range(x.shape[0]):
         nodes, fx, dfx, fy, dfy = located_weights(x[p, 0], x[p, 1], constants, marker, factors_x, table_x, factors_y,
                                                   table_y, topology)
-        volume = mass_p[p] / density_p[p]
+        volume = quotient(mass_p[p], density_p[p])
         total += stress[p, 0] + stress[p, 1] + stress[p, 2]
         _tensor_force(nodes, fx, dfx, fy, dfy, n1, volume * stress[p, 0], volume * stress[p, 1],
                       volume * stress[p, 2], force)
