@@ -27,7 +27,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from femgrid_mpm.kernels.arithmetic import fused
+from femgrid_mpm.kernels.arithmetic import fused, quotient
 from femgrid_mpm.kernels.transfer import density_factor
 
 
@@ -93,7 +93,7 @@ def minimal_step(x, v, mass, density, stress, strain, lame_lambda, two_mu, dt, l
         start[p, 0] = dvx_dx + dvy_dy
         start[p, 1] = ux
         start[p, 2] = uy
-        volume = mass[p] / density[p]
+        volume = quotient(mass[p], density[p])
         for di, wx, gx in ((0, 1.0 - fx, -inverse_spacing), (1, fx, inverse_spacing)):
             for dj, wy, gy in ((0, 1.0 - fy, -inverse_spacing), (1, fy, inverse_spacing)):
                 n = node + di * stride + dj
