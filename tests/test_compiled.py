@@ -103,3 +103,21 @@ def test_the_library_kernels_use_the_fingerprinted_directory():
     for kernel in (transfer.tensor_p2g_sums, transfer.local_g2p, mass._compiled_cg):
         directory = Path(kernel._cache._cache_path).parent
         assert directory.name == PREFIX + fingerprint(Path(transfer.__file__).parents[1])
+
+
+def test_numbas_own_cache_files_are_removed_from_the_package(tmp_path):
+    _write_package(tmp_path, 1.0)
+    pycache = tmp_path / "inlining" / "__pycache__"
+    pycache.mkdir()
+    stale = [pycache / "kernels.kernel-5.py311.nbi", pycache / "kernels.kernel-5.py311.1.nbc"]
+    for path in stale:
+        path.write_bytes(b"")  # as numba's in-tree locator names them
+    bytecode = pycache / "kernels.cpython-311.pyc"
+    bytecode.write_bytes(b"")
+    env = dict(os.environ, PYTHONPATH=str(tmp_path))
+    env.pop("NUMBA_CACHE_DIR", None)  # the in-tree cache
+    subprocess.run([sys.executable, "-c", "from inlining.kernels import kernel; kernel(1.0)"], env=env, check=True)
+    assert not any(path.exists() for path in stale)
+    assert bytecode.exists()
+    (own,) = pycache.glob(PREFIX + "*")
+    assert list(own.rglob("*.nbi"))  # the kernel's cache, kept

@@ -18,7 +18,8 @@ if the package's directory is writable, else
 ``$NUMBA_CACHE_DIR/<package>-<path hash>/numba-<fingerprint>``.  Beside the
 current fingerprint the ``KEPT`` most recent ones are kept, and no directory
 used in the last ``KEEP_DAYS`` days is removed (a long run may still write to
-its own).  Where no directory is writable, kernels are compiled in every
+its own); the files of numba's own in-tree cache are removed from the
+package's ``__pycache__`` directories.  Where no directory is writable, kernels are compiled in every
 process, with one warning: loading from a cache that cannot be keyed would
 bring back the stale kernels.
 """
@@ -80,6 +81,18 @@ def _bases(root: Path) -> list[Path]:
     return [in_tree, user]
 
 
+def _remove_unkeyed(root: Path) -> None:
+    """Remove the files numba's own in-tree cache left in the package's ``__pycache__``
+    directories (before :func:`compiled`, or by a plain ``numba.njit(cache=True)``):
+    they are never read again, and would be the stale ones if they were."""
+    if not root.is_dir():
+        return
+    for pattern in ("*.nbi", "*.nbc"):
+        for stale in root.glob(f"**/__pycache__/{pattern}"):
+            if not any(part.startswith(PREFIX) for part in stale.relative_to(root).parts):
+                stale.unlink(missing_ok=True)
+
+
 def _prune(base: Path, current: Path) -> None:
     """Remove fingerprint directories beyond the ``KEPT`` most recent that are unused
     for ``KEEP_DAYS``."""
@@ -104,6 +117,8 @@ def cache_directory(root: Path) -> Path | None:
         if _writable(directory):
             os.utime(directory)  # most recently used, for the pruning of other processes
             _prune(base, directory)
+            if base.name == "__pycache__":
+                _remove_unkeyed(root)
             return directory
     warnings.warn(f"femgrid-mpm: no writable cache directory for the kernels of {root} (tried "
                   f"{', '.join(str(b) for b in _bases(root))}): they are compiled in every process",
