@@ -24,14 +24,14 @@ True
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from femgrid_mpm.kernels.arithmetic import fused, quotient
+from femgrid_mpm.kernels.compiled import compiled  # cached by fingerprint: it inlines the library's helpers
 from femgrid_mpm.kernels.transfer import density_factor
 
 
-@numba.njit(cache=True, inline="always")
+@compiled(inline="always")
 def _cell(x, p, lower, inverse_spacing, stride):
     """Point p's cell: its lower-left node and the coordinates (0..1) within it."""
     sx = (x[p, 0] - lower[0]) * inverse_spacing
@@ -41,7 +41,7 @@ def _cell(x, p, lower, inverse_spacing, stride):
     return i * stride + j, sx - i, sy - j
 
 
-@numba.njit(cache=True)
+@compiled()
 def minimal_step(x, v, mass, density, stress, strain, lame_lambda, two_mu, dt, lower, inverse_spacing, n_y,
                  grid_mass, momentum, velocity, force, start):
     """One step for every point: P2G, grid velocity, stress and force, grid acceleration, G2P.

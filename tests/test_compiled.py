@@ -12,7 +12,8 @@ import sys
 import textwrap
 from pathlib import Path
 
-from femgrid_mpm.kernels.compiled import PREFIX, fingerprint
+from femgrid_mpm.kernels import compiled as compiled_module
+from femgrid_mpm.kernels.compiled import PREFIX, cache_key, fingerprint
 
 
 def _write_package(root: Path, value: float, note: str = "") -> None:
@@ -121,3 +122,18 @@ def test_numbas_own_cache_files_are_removed_from_the_package(tmp_path):
     assert bytecode.exists()
     (own,) = pycache.glob(PREFIX + "*")
     assert list(own.rglob("*.nbi"))  # the kernel's cache, kept
+
+
+def test_code_outside_the_library_is_keyed_by_the_library_too(tmp_path, monkeypatch):
+    """A kernel outside the library (the yardstick) inlines the library's helpers: an edit
+    of the library must give it a new cache too."""
+    _write_package(tmp_path, 1.0)
+    package = tmp_path / "inlining"
+    library = tmp_path / "library"
+    library.mkdir()
+    (library / "helpers.py").write_text("import numba\n")
+    monkeypatch.setattr(compiled_module, "LIBRARY", library)
+    first = cache_key(package)
+    assert cache_key(library) == fingerprint(library)
+    (library / "helpers.py").write_text("import numba  # edited\n")
+    assert cache_key(package) != first

@@ -43,6 +43,8 @@ KEPT = 4
 #: and none used this recently is removed, whatever their number
 KEEP_DAYS = 7
 PREFIX = "numba-"
+#: this library's package directory: code elsewhere that uses :func:`compiled` may inline its helpers
+LIBRARY = Path(__file__).resolve().parents[1]
 
 
 def fingerprint(root: Path) -> str:
@@ -59,6 +61,16 @@ def fingerprint(root: Path) -> str:
             name = path.name if root.is_file() else path.relative_to(root).as_posix()
             digest.update(name.encode() + b"\0" + text + b"\0")
     return digest.hexdigest()[:16]
+
+
+def cache_key(root: Path) -> str:
+    """The fingerprint that names ``root``'s cache: :func:`fingerprint` of ``root``, and
+    for code outside this library also of the library, whose helpers (``fused``,
+    ``quotient``, ``density_factor``) such code may inline (``benchmarks/minimal_q1.py``)."""
+    own = fingerprint(root)
+    if root == LIBRARY:
+        return own
+    return hashlib.sha256(f"{own} {fingerprint(LIBRARY)}".encode()).hexdigest()[:16]
 
 
 def _writable(directory: Path) -> bool:
@@ -111,7 +123,7 @@ def _prune(base: Path, current: Path) -> None:
 def cache_directory(root: Path) -> Path | None:
     """The cache directory of the kernels of the package (or module) at ``root``,
     made, marked as used and with old ones pruned; None if none can be written."""
-    name = PREFIX + fingerprint(root)
+    name = PREFIX + cache_key(root)
     for base in _bases(root):
         directory = base / name
         if _writable(directory):
