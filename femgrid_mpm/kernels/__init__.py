@@ -19,7 +19,7 @@
               ``[solver] engine``.
 
 Every kernel is serial, cached on disk (:func:`.compiled.compiled`: compiled
-once per machine and source tree, then loaded: about 50-57 s the first time for
+once per machine and source tree, then loaded: about 60 s the first time for
 every basis and mass kind) and ``fastmath=False``, its fused multiply-adds
 asked for by name (:mod:`.arithmetic`): results are reproducible bit for bit
 from run to run and from machine to machine.  Node and entry indices are

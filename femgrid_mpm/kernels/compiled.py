@@ -19,9 +19,9 @@ if the package's directory is writable, else
 current fingerprint the ``KEPT`` most recent ones are kept, and no directory
 used in the last ``KEEP_DAYS`` days is removed (a long run may still write to
 its own); the files of numba's own in-tree cache are removed from the
-package's ``__pycache__`` directories.  Where no directory is writable, kernels are compiled in every
-process, with one warning: loading from a cache that cannot be keyed would
-bring back the stale kernels.
+package's ``__pycache__`` directories.  Where no directory is writable,
+kernels are compiled in every process, with one warning: loading from a cache
+that cannot be keyed would bring back the stale kernels.
 """
 
 from __future__ import annotations
