@@ -22,7 +22,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from femgrid_mpm import solver as solver_module  # noqa: E402
+from femgrid_mpm.engines import ScipyTransfer  # noqa: E402
+from femgrid_mpm.mass import Assembly, Inertia, MassModel  # noqa: E402
 from femgrid_mpm.analysis import bar_axial_period_2d, modal_velocity_probe, zero_crossing_period  # noqa: E402
 from femgrid_mpm.diagnostics import SimulationStopped  # noqa: E402
 from femgrid_mpm.scene import Scene, bundled_scene  # noqa: E402
@@ -87,12 +88,11 @@ def q2_cases():
                   flush=True)
 
 
-class GlobalHrz:
-    """The issue's variant, for comparison only: transfers through N."""
+class GlobalHrz(MassModel):
+    """HRZ over the whole grid, for comparison only: transfers through N (the scipy engine)."""
 
     kind = "hrz"
-    needs_matrices = True
-    weights = None
+    assembly = Assembly()
 
     def __init__(self, simulation):
         self.simulation = simulation
@@ -114,8 +114,11 @@ class GlobalHrz:
     def solve(self, rhs, kind="velocity"):
         return rhs * self._inverse[:, None]
 
-    def inverses(self):
-        return self._inverse, self._inverse
+    def assemble_sums(self, sums):
+        raise NotImplementedError("assembled from the matrices only")
+
+    def inertia(self, N):
+        return Inertia(inverses=(self._inverse, self._inverse), transfer=N)
 
     def apply(self, vector):
         return vector * self.diagonal[:, None]
@@ -124,7 +127,7 @@ class GlobalHrz:
 def with_global_hrz(scene):
     simulation = Simulation(scene)
     simulation.mass = GlobalHrz(simulation)
-    simulation.transfer = solver_module.TRANSFERS["scipy"](simulation)
+    simulation.transfer = ScipyTransfer(simulation)
     simulation.context = simulation.transfer.context(simulation, simulation.dt)
     return simulation
 

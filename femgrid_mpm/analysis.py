@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from .effects.base import Stage, StepContext
+from .step import Stage, StepContext
 
 
 @dataclass

@@ -98,6 +98,8 @@ class Grid:
         # a tolerance so that 7.0 / 0.5 counts as 14, not 15, under rounding
         n_elements = tuple(int(max(1, math.ceil(extent / width - 1e-9))) for extent in upper - lower)
         self.basis = basis
+        #: what the basis declares about itself (:class:`~femgrid_mpm.bases.BasisDefinition`)
+        self.definition = builder
         self.spacing = float(spacing)
         self.lower = lower
         self.upper = lower + np.array(n_elements) * width

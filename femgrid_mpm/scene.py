@@ -256,6 +256,13 @@ class Scene(_Model):
                 raise ValueError("solver.negative_mass: 'threshold' is implemented for one shared field, not for 'frictional' contact")
         return self
 
+    def declared_effects(self) -> list:
+        """The scene's acting effects in step order: loads, damping, contact (frictional only:
+        shared contact is the single-field step itself), supports.  Contact before supports:
+        both constrain the grid velocity, supports have the last word."""
+        contact = [self.contact] if self.contact is not None and self.contact.kind == "frictional" else []
+        return [*self.loads, *([self.damping] if self.damping else []), *contact, *self.supports]
+
     def node_count(self) -> float:
         """About how many grid nodes the scene makes (counted, nothing allocated)."""
         return node_count(self.grid.lower, self.grid.upper, self.grid.spacing, BASES[self.grid.basis].cells_per_element)

@@ -26,17 +26,17 @@ from typing import Callable
 import numpy as np
 
 from .diagnostics import EnergyGuard, NegativeMassMonitor, SimulationStopped, points_kinetic_energy
-from .effects.base import Stage, StepContext
-from .energy import COLUMNS, EnergyBookkeeping, kinetic_energy
+from .energy import EnergyBookkeeping, kinetic_energy
+from .engines import engine_for
 from .expressions import compile_expression
 from .grid import Grid
-from .fields import FieldLumpedMass, FieldTransfer
-from .kernels.engines import TRANSFERS
-from .mass import ConsistentMass, HrzMass, LumpedMass, SingularMassError, tensor_preconditioner
+from .mass import MassModel, SingularMassError, build_mass_model
 from .materials import make_material
 from .particles import Particles, seed_rectangle
 from .scene import Scene
 from .stability import critical_time_step
+from .state import restore_state, simulation_state
+from .step import Stage, StepContext
 
 
 @dataclass
@@ -96,30 +96,23 @@ class Simulation:
         self.body_slices = self.particles.body_slices()
         _warn_of_overlaps(scene.bodies)
         self.reference_mass = max(m.density for m in self.materials) * spec.spacing**2
-        self.mass = self._mass_model()
         self.every = scene.output.every if scene.output else 0
-        self.negative_mass = NegativeMassMonitor(
-            self.reference_mass, scene.solver.negative_mass, applies=scene.solver.mass == "lumped"
-        )
         self.energy = EnergyBookkeeping() if scene.output and scene.output.energy else None
-        # contact before supports: both constrain the grid velocity, supports have the last word
-        contact = [scene.contact] if self.fields_per_body else []
-        acting = [*scene.loads, *([scene.damping] if scene.damping else []), *contact, *scene.supports]
+        acting = scene.declared_effects()  # in step order within each stage
+        # supports must be known to a coupled mass, and to the critical time step
+        held = [fixed for fixed in (effect.fixed(self.grid) for effect in acting) if fixed is not None]
+        self.fixed = np.logical_or.reduce(held) if held else None
+        self.dt = self._time_step()
+        self.mass: MassModel = self.mass_model(time_step=self.dt)
+        self.negative_mass = NegativeMassMonitor(
+            self.reference_mass, scene.solver.negative_mass, applies=self.mass.divides_by_row_sums
+        )
+        self.n_steps = int(np.ceil(scene.time.end / self.dt - 1e-9))
         watching = [*([self.energy] if self.energy else []), *(observers or [])]
         self.effects: dict[Stage, list[tuple[str, Callable]]] = {stage: [] for stage in Stage}
-        for effect in acting:
+        for effect in [*acting, *watching]:  # observers last: they may read dt and n_steps
             self.effects[effect.stage].append((effect.name, effect.bind(self)))
-        # supports must be known to a coupled mass, and to the critical time step
-        fixed = [action.fixed for _, action in self.effects[Stage.CONSTRAIN] if hasattr(action, "fixed")]
-        if fixed and isinstance(self.mass, ConsistentMass):
-            self.mass.fixed = np.logical_or.reduce(fixed)
-        self.dt = self._time_step()
-        if hasattr(self.mass, "time_step"):
-            self.mass.time_step = self.dt
-        self.n_steps = int(np.ceil(scene.time.end / self.dt - 1e-9))
-        for effect in watching:  # observers last: they may read dt and n_steps
-            self.effects[effect.stage].append((effect.name, effect.bind(self)))
-        self.transfer = FieldTransfer(self) if self.fields_per_body else TRANSFERS[getattr(scene.solver, "engine", "numba")](self)
+        self.transfer = engine_for(self)
         self.context = self.transfer.context(self, self.dt)
         self.step_index = 0
         self.time = 0.0
@@ -171,31 +164,12 @@ class Simulation:
         contact = self.scene.contact
         return contact is not None and contact.kind == "frictional"
 
-    def _mass_model(self):
-        solver = self.scene.solver
-        if self.fields_per_body:
-            return FieldLumpedMass(self.grid.n_nodes, self.reference_mass, self.body_slices)
-        if solver.mass == "hrz":
-            return HrzMass(self.grid.n_nodes, self.reference_mass)
-        if solver.mass == "lumped":
-            if solver.negative_mass == "threshold":
-                return LumpedMass(self.grid.n_nodes, self.reference_mass, threshold=solver.mass_threshold,
-                                  node_integrals=self.grid.node_integrals)
-            return LumpedMass(self.grid.n_nodes, self.reference_mass)
-        return ConsistentMass(
-            self.grid.n_nodes,
-            self.reference_mass,
-            node_integrals=self.grid.node_integrals,
-            nonnegative=self.grid.nonnegative,
-            weak_fraction=solver.weak_fraction,
-            tolerance=solver.cg_tolerance,
-            linear_solver=solver.linear_solver,
-            fallback=solver.consistent_fallback,
-            blend=solver.blend,
-            preconditioner=tensor_preconditioner(self.grid),
-            lattice=None if self.grid.nonnegative else self.grid.lattice_indices,
-            layer_width=round(self.grid.discretization.element_width / self.grid.spacing),  # in lattice steps
-        )
+    def mass_model(self, time_step: float | None = None) -> MassModel:
+        """A new mass model of the scene's kind, complete with the supports' fixed degrees of
+        freedom (the run's own, with its ``time_step``; the critical step estimates on one
+        of its own, with None)."""
+        return build_mass_model(self.scene.solver, self.grid, self.reference_mass, self.body_slices,
+                                per_body=self.fields_per_body, fixed=self.fixed, time_step=time_step)
 
     def _time_step(self) -> float:
         time = self.scene.time
@@ -239,13 +213,9 @@ class Simulation:
             relative_momentum = self.transfer.to_grid(ctx, self.mass)
         except ValueError as error:
             raise self._stop(f"a particle left the grid: {error}", "particle_left_grid") from None
-        if hasattr(self.mass, "field_lumped"):  # each field divides by its own
-            for lumped in self.mass.field_lumped:
-                self.negative_mass.check(lumped, ctx.step, ctx.time, self.grid.nodes)
-        else:
-            self.negative_mass.check(self.mass.lumped, ctx.step, ctx.time, self.grid.nodes,
-                                     getattr(self.mass, "smallest", None))
-        self.negative_mass.record_below_threshold(getattr(self.mass, "nodes_below_threshold", 0), ctx.step)
+        for lumped, smallest in self.mass.row_sums():  # one per field
+            self.negative_mass.check(lumped, ctx.step, ctx.time, self.grid.nodes, smallest)
+        self.negative_mass.record_below_threshold(self.mass.nodes_below_threshold, ctx.step)
         try:  # Eq. 17: v = M^-1 p_rel + v_ref, and the momentum p_rel + m v_ref
             ctx.momentum, ctx.velocity = self.mass.grid_velocity(relative_momentum, ctx.frame_velocity)
         except SingularMassError as error:
@@ -404,83 +374,27 @@ class Simulation:
         rest_speed = self.scene.time.rest_speed
         if rest_speed is None or self.time < self.scene.time.rest_after:
             return False
-        lumped = np.maximum(getattr(self.mass, "diagonal", self.mass.lumped), 0.0)
+        lumped = np.maximum(self.mass.nodal_masses(), 0.0)
         mean_square = np.sum(lumped[:, None] * self.context.velocity**2) / np.sum(lumped)
         return bool(np.sqrt(mean_square) < rest_speed)
 
     # -- state, for checkpoints -------------------------------------------------
 
     def state(self) -> tuple[dict, dict]:
-        """Everything that carries from one step to the next, as ``(arrays, values)``:
-        numpy arrays, and plain JSON values (numbers keep every bit through
-        ``repr``).
-
-        The points (every array of :class:`Particles`), the step, the work
-        ledger (in its order: the energy sums it in that order), the energy
-        records and their initial values, the runaway guard's bound, the
-        negative-mass counters and the mass model's own history (CG's warm
-        start).  Everything else is rebuilt from the scene, or recomputed
-        from these at every step.
-        """
-        p = self.particles
-        arrays = {f"particles.{name}": getattr(p, name) for name in p.__dataclass_fields__}
-        values = {
-            "step": self.step_index,
-            "time": self.time,
-            "dt": self.dt,
-            "wall_time": self.wall_time + (clock.perf_counter() - self._run_started if self._run_started else 0.0),
-            "work": [[name, value] for name, value in self.context.work.items()],
-            "energy_guard": {"initial": self.energy_guard.initial, "floor": self.energy_guard.floor},
-            "negative_mass": self.negative_mass.state(),
-        }
-        if self.energy is not None:
-            values["energy_initial"], arrays["energy.rows"] = self.energy.state()
-        if hasattr(self.mass, "state"):
-            mass_arrays, values["mass"] = self.mass.state()
-            arrays.update({f"mass.{name}": array for name, array in mass_arrays.items()})
-        return arrays, values
+        """Everything that carries from one step to the next, ``(arrays, values)``
+        (see :func:`femgrid_mpm.state.simulation_state`)."""
+        return simulation_state(self, clock.perf_counter())
 
     def restore(self, arrays: dict, values: dict) -> None:
-        """Take back :meth:`state` into a simulation built from the same scene.
+        """Take back :meth:`state` into a simulation built from the same scene
+        (see :func:`femgrid_mpm.state.restore_state`).
 
         Raises
         ------
         ValueError
             If the state does not fit this simulation (another scene).
         """
-        p = self.particles
-        # everything is checked before anything is taken back: a refused state leaves this one as it was
-        saved = {name: np.asarray(arrays[f"particles.{name}"]) for name in p.__dataclass_fields__}
-        for name, array in saved.items():
-            current = getattr(p, name)
-            if array.shape != current.shape or array.dtype != current.dtype:
-                raise ValueError(f"particles.{name}: shape {array.shape} {array.dtype}, this scene has {current.shape} {current.dtype}")
-        if values["dt"] != self.dt:
-            raise ValueError(f"dt {values['dt']!r} s, this scene has {self.dt!r} s")
-        if not 0 <= int(values["step"]) <= self.n_steps:
-            raise ValueError(f"step {values['step']!r}, this scene runs steps 0 to {self.n_steps}")
-        body = saved["body"]
-        if body.size and not 0 <= int(body.min()) <= int(body.max()) < len(self.scene.bodies):
-            raise ValueError(f"particles.body: indices {int(body.min())} to {int(body.max())}, "
-                             f"this scene has {len(self.scene.bodies)} bodies")
-        if self.energy is not None:
-            rows = np.asarray(arrays["energy.rows"])
-            if rows.size and (rows.ndim != 2 or rows.shape[1] != len(COLUMNS)):
-                raise ValueError(f"energy.rows: shape {rows.shape}, the energy record has {len(COLUMNS)} columns")
-        for name, array in saved.items():
-            np.copyto(getattr(p, name), array)  # in place: effects and engines may hold the arrays
-        self.step_index, self.time = int(values["step"]), float(values["time"])
-        self.wall_time = float(values["wall_time"])
-        self.context.work.clear()
-        self.context.work.update((str(name), float(value)) for name, value in values["work"])
-        self.energy_guard.initial = float(values["energy_guard"]["initial"])
-        self.energy_guard.floor = float(values["energy_guard"]["floor"])
-        self.negative_mass.restore(values["negative_mass"])
-        if self.energy is not None:
-            self.energy.restore(values["energy_initial"], arrays["energy.rows"])
-        if hasattr(self.mass, "restore"):
-            prefix = "mass."
-            self.mass.restore({k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}, values["mass"])
+        restore_state(self, arrays, values)
 
     def result(self, status: str, message: str) -> RunResult:
         scene = self.scene
@@ -500,11 +414,6 @@ class Simulation:
             "effects": self.active_effects,
             "negative_mass": self.negative_mass.summary(),
         }
-        if isinstance(self.mass, ConsistentMass):
-            summary["consistent_mass"] = {
-                "cg_iterations": self.mass.iterations,
-                "weak_nodes_last_step": self.mass.weak_nodes,
-                "blended_steps": self.mass.blended_steps,
-            }
+        summary.update(self.mass.summary())
         energy = self.energy.table() if self.energy else None
         return RunResult(status, message, energy, self.particles, summary)

@@ -8,11 +8,13 @@ tangent of each body's material), and ``M`` the mass the iteration actually
 has (see :func:`critical_time_step`), with supports and empty nodes removed.
 
 :func:`critical_time_step` computes it at set-up (once; points that move
-far change it, see the stress suite).  The table :data:`BLOCH_FACTORS`
+far change it, see the stress suite).  The bases' ``critical_step_factors``
 gives the classic full-grid values in units of element width over p-wave
 speed, for comparison only: near supports and partly filled cells the true
 limit can be far smaller (the cantilever with consistent cubic B-splines:
-a mode with 1e-4 of the lumped mass, unstable at the table's step).
+a mode with 1e-4 of the lumped mass, unstable at the table's step).  Each basis
+declares its own factors (``critical_step_factors``, see
+:class:`femgrid_mpm.bases.BasisDefinition`).
 A singular consistent mass (a mode without inertia; the run then relies on
 ``consistent_fallback``) admits no stable step: the estimate is then 0.
 """
@@ -25,24 +27,12 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-#: (basis, mass) -> dt_crit * c_p / element_width on a full, unsupported grid
-BLOCH_FACTORS = {
-    ("q1", "lumped"): 1.0,
-    ("q1", "consistent"): 0.5,
-    ("q2", "lumped"): 0.4,
-    ("q2", "consistent"): 0.2,
-    ("bspline3", "lumped"): 1.9,
-    ("bspline3", "consistent"): 0.55,
-    ("serendipity", "lumped"): 0.0,
-    ("serendipity", "consistent"): 0.2,
-    ("bspline3_open", "lumped"): 1.9,
-    ("bspline3_open", "consistent"): 0.55,
-}
-
+from .bases import BASES
 
 def bloch_time_step(basis: str, mass: str, element_width: float, wave_speed: float) -> float:
-    """The table's estimate (s); 0 if no step is stable."""
-    factor = BLOCH_FACTORS[(basis, mass)]
+    """The basis' classic estimate (s) for ``"lumped"`` or ``"consistent"`` mass; 0 if no
+    step is stable."""
+    factor = BASES[basis].critical_step_factors[mass]
     return factor * element_width / wave_speed if wave_speed > 0 else math.inf
 
 
@@ -127,9 +117,11 @@ def critical_time_step(simulation) -> float:
     and for the mass threshold, whose diagonal holds absolute masses at the
     nodes below it.  (A mass model whose velocity and acceleration divided
     by different diagonals would give ``D_v^-1 M_C D_a^-1``, not symmetric:
-    :meth:`inverses` returns both.)
+    :class:`~femgrid_mpm.mass.Inertia` holds both.)  The estimate assembles a mass
+    model of its own (:meth:`femgrid_mpm.solver.Simulation.mass_model`), so it may be
+    asked for at any time without touching the run's.
     """
-    grid, p, mass_model = simulation.grid, simulation.particles, simulation.mass
+    grid, p, mass_model = simulation.grid, simulation.particles, simulation.mass_model()
     N, dNdx, dNdy = grid.shape_functions(p.x)
     moduli = np.empty((p.n, 4))
     for material, members in zip(simulation.materials, simulation.body_slices):
@@ -138,33 +130,21 @@ def critical_time_step(simulation) -> float:
     stiffness = stiffness_matrix(dNdx, dNdy, p.volume, moduli)
     mass_model.assemble(N, p.mass, p.volume)
     free = np.repeat(mass_model.active, 2)
-    fixed = _fixed_degrees_of_freedom(simulation)
-    if fixed is not None:
-        free &= ~fixed.ravel()
+    if simulation.fixed is not None:
+        free &= ~simulation.fixed.ravel()
     stiffness = stiffness[free][:, free]
     try:
-        if mass_model.kind in ("lumped", "hrz"):  # diagonal: row sums (and the threshold's), or HRZ
-            if hasattr(mass_model, "inverses"):
-                velocity_inverse, acceleration_inverse = (sp.diags(inverse) for inverse in mass_model.inverses())
-            else:  # one field per body (frictional contact): the shared field's estimate
-                velocity_inverse = acceleration_inverse = sp.diags(
-                    np.divide(1.0, mass_model.lumped, out=np.zeros(grid.n_nodes), where=mass_model.active))
-            weights = getattr(mass_model, "weights", None)
-            transfer = N if weights is None else weights
+        inertia = mass_model.inertia(N)
+        if inertia.matrix is None:  # diagonal: row sums (and the threshold's), HRZ, or per body
+            velocity_inverse, acceleration_inverse = (sp.diags(inverse) for inverse in inertia.inverses)
+            transfer = inertia.transfer
             consistent = (transfer.T @ transfer.multiply(p.mass[:, None]).tocsr()).tocsr()
             effective = velocity_inverse @ consistent @ acceleration_inverse
             effective = sp.kron(effective, sp.identity(2), format="csr")[free][:, free]
             omega_squared = largest_eigenvalue_of_product(effective, stiffness)
         else:
-            mass = sp.kron(mass_model.matrix, sp.identity(2), format="csr")[free][:, free]
+            mass = sp.kron(inertia.matrix, sp.identity(2), format="csr")[free][:, free]
             omega_squared = largest_frequency_squared(stiffness, mass)
     except (np.linalg.LinAlgError, spla.ArpackError, RuntimeError):
         return 0.0  # a singular consistent mass: some mode has no inertia
     return 2.0 / math.sqrt(omega_squared) if omega_squared > 0 else math.inf
-
-
-def _fixed_degrees_of_freedom(simulation):
-    from .effects.base import Stage
-
-    fixed = [action.fixed for _, action in simulation.effects[Stage.CONSTRAIN] if hasattr(action, "fixed")]
-    return np.logical_or.reduce(fixed) if fixed else None

@@ -99,7 +99,7 @@ def test_a_single_module_is_its_own_root(tmp_path):
 def test_the_library_kernels_use_the_fingerprinted_directory():
     from femgrid_mpm.kernels import transfer
 
-    import femgrid_mpm.mass as mass
+    import femgrid_mpm.mass.cg as mass
 
     for kernel in (transfer.tensor_p2g_sums, transfer.local_g2p, mass._compiled_cg):
         directory = Path(kernel._cache._cache_path).parent

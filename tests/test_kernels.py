@@ -65,7 +65,7 @@ def test_compiled_matrix_product_matches_scipy(columns):
     ``_CompiledCSR`` with no symmetric half against scipy's."""
     import scipy.sparse as sp
 
-    from femgrid_mpm.mass import _CompiledCSR
+    from femgrid_mpm.mass.sparse import _CompiledCSR
 
     rng = np.random.default_rng(3)
     matrix = sp.random(40, 40, density=0.3, random_state=4, format="csr")
@@ -275,7 +275,7 @@ def test_flat_kernels_serve_a_basis_with_no_special_form(monkeypatch, mass):
     and the folded kernels agree with the flat ones bit for bit in the weights."""
     import dataclasses
 
-    import femgrid_mpm.kernels.engines as engines
+    import femgrid_mpm.engines.numba_engine as engines
 
     reference = Simulation(block_scene("serendipity", mass, "scipy"))
     folded = Simulation(block_scene("serendipity", mass, "numba"))

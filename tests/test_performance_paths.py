@@ -13,8 +13,9 @@ from femgrid_mpm import Grid
 from femgrid_mpm.bases import BASES
 from femgrid_mpm.kernels.basis import separated_tables
 from femgrid_mpm.kernels.pattern import mass_pattern
-from femgrid_mpm.mass import (_apply_tensor, _preconditioned_cg, _symmetric_times_dense_dot,
-                              tensor_preconditioner)
+from femgrid_mpm.mass.cg import _preconditioned_cg
+from femgrid_mpm.mass.preconditioners import _apply_tensor, tensor_preconditioner
+from femgrid_mpm.mass.sparse import _symmetric_times_dense_dot
 from femgrid_mpm.solver import Simulation
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
@@ -126,7 +127,7 @@ def test_no_boundary_layer_for_a_thin_body():
     """A body 3 cells thick lies within the layer's width of its edges everywhere: the
     layer would hold every kept node (above LAYER_LIMIT), so it is not built, and CG
     with the tensor preconditioner alone still solves the system."""
-    from femgrid_mpm.mass import LAYER_LIMIT
+    from femgrid_mpm.mass.preconditioners import LAYER_LIMIT
     from femgrid_mpm.scene import Scene
 
     scene = Scene.model_validate({
@@ -152,7 +153,7 @@ def test_no_boundary_layer_for_a_thin_body():
 def test_a_layer_that_is_not_positive_definite_falls_back_to_the_tensor_preconditioner(monkeypatch):
     """CG stops as soon as ``r.z < 0`` (``converged`` None); the solve then runs again
     with the tensor preconditioner alone and still reaches SuperLU's solution."""
-    from femgrid_mpm.mass import _System
+    from femgrid_mpm.mass.system import _System
 
     class Negative:
         def sweep(self, r, tensor_solve):

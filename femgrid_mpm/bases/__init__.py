@@ -1,12 +1,15 @@
 """The background-grid bases: one registry line each.
 
-To add a basis, write a builder with ``name``, ``degree``,
-``cells_per_element`` and ``build(lower, n_elements, spacing) ->
-Discretization`` (see ``finite_element.py`` for scikit-fem elements and
-``bspline3.py`` for a basis of the library's own), and add it to ``BASES``.
-The property tests in ``tests/test_bases.py`` loop over this registry.
+To add a basis, write a definition with the attributes and the
+``build(lower, n_elements, spacing) -> Discretization`` of
+:class:`~.definition.BasisDefinition` (see ``finite_element.py`` for
+scikit-fem elements and ``bspline3.py`` for a basis of the library's own),
+and add it to ``BASES``.  The scene's ``[grid] basis`` choices, the command
+line's ``--basis`` and the property tests in ``tests/test_bases.py`` are read
+from this registry.
 """
 
+from .definition import BasisDefinition
 from .bspline3 import BSPLINE3, BSPLINE3_OPEN, ElementBSpline3, TensorSplines, cubic_spline
 from .finite_element import Q1, Q2, SERENDIPITY, FiniteElementBasis
 from .lattice import Discretization
@@ -16,6 +19,7 @@ BASES = {builder.name: builder for builder in (Q1, Q2, SERENDIPITY, BSPLINE3, BS
 
 __all__ = [
     "BASES",
+    "BasisDefinition",
     "BSPLINE3",
     "BSPLINE3_OPEN",
     "Discretization",

@@ -26,7 +26,9 @@ from the boundary.  Linear functions are still reproduced exactly.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Mapping
 
 import numpy as np
 import skfem
@@ -173,7 +175,13 @@ class BSpline3Basis:
     knots: str = "ghost"
     degree: int = 3
     cells_per_element: int = 1
+    support_width: int = 4
     nonnegative: bool = True
+    critical_step_factors: Mapping[str, float] = field(
+        default_factory=lambda: MappingProxyType({"lumped": 1.9, "consistent": 0.55}))
+    #: uniform splines in the interior: the Gram matrix is a tensor product there
+    tensor_gram: bool = True
+    mass_threshold: bool = True
 
     def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float) -> Discretization:
         element = ElementBSpline3()

@@ -18,7 +18,9 @@ instead of reading (:func:`femgrid_mpm.kernels.basis.lattice_numbering`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Mapping
 
 import numpy as np
 import skfem
@@ -43,6 +45,9 @@ class FiniteElementBasis:
         Element width in lattice spacings: 1 for Q1; 2 for Q2 and
         serendipity, whose mid-side (and centre) nodes then sit on the same
         lattice as Q1's nodes.
+
+    The other attributes are those of
+    :class:`~femgrid_mpm.bases.definition.BasisDefinition`.
     """
 
     name: str
@@ -50,6 +55,15 @@ class FiniteElementBasis:
     degree: int
     cells_per_element: int
     nonnegative: bool
+    critical_step_factors: Mapping[str, float] = field(default_factory=dict)
+    mass_threshold: bool = True
+    #: scikit-fem's elements are Lagrange or serendipity polynomials, not splines
+    tensor_gram: bool = False
+
+    @property
+    def support_width(self) -> int:
+        """A vertex function spans the two elements beside its node."""
+        return 2 * self.cells_per_element
 
     def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float) -> Discretization:
         width = spacing * self.cells_per_element
@@ -141,8 +155,14 @@ def _snap_to_lattice(points: np.ndarray, lower: np.ndarray, spacing: float) -> n
     return np.ascontiguousarray(lower + index * spacing)
 
 
-Q1 = FiniteElementBasis("q1", skfem.ElementQuad1, degree=1, cells_per_element=1, nonnegative=True)
-Q2 = FiniteElementBasis("q2", skfem.ElementQuad2, degree=2, cells_per_element=2, nonnegative=False)
+Q1 = FiniteElementBasis("q1", skfem.ElementQuad1, degree=1, cells_per_element=1, nonnegative=True,
+                        critical_step_factors=MappingProxyType({"lumped": 1.0, "consistent": 0.5}))
+Q2 = FiniteElementBasis("q2", skfem.ElementQuad2, degree=2, cells_per_element=2, nonnegative=False,
+                        critical_step_factors=MappingProxyType({"lumped": 0.4, "consistent": 0.2}))
+# serendipity's corner functions integrate to -1/12 of an element: row-sum masses there are
+# negative wherever a body fills the element, so no lumped step is stable and no full share
+# exists for the mass threshold
 SERENDIPITY = FiniteElementBasis(
-    "serendipity", skfem.ElementQuadS2, degree=2, cells_per_element=2, nonnegative=False
+    "serendipity", skfem.ElementQuadS2, degree=2, cells_per_element=2, nonnegative=False,
+    critical_step_factors=MappingProxyType({"lumped": 0.0, "consistent": 0.2}), mass_threshold=False,
 )

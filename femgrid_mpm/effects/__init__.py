@@ -4,7 +4,7 @@ Registry: scene ``kind`` -> class.  See :mod:`femgrid_mpm.effects.base` for
 the protocol and the stages.
 """
 
-from .base import Stage, StepContext
+from ..step import Stage, StepContext
 from .contact import Contact
 from .damping import MassDamping
 from .gravity import Gravity

@@ -6,7 +6,7 @@ no code of its own (it is the single-field step).
 
 ``[contact] kind = "frictional"`` follows Bardenhagen, Guilkey, Roessig,
 Brackbill, Witzel and Foster (2001, CMES 2(4)): every body has its own grid
-field (:mod:`femgrid_mpm.fields`), and at a node where several bodies have
+field (:mod:`femgrid_mpm.mass.per_body`), and at a node where several bodies have
 mass each body's velocity is compared with the centre-of-mass velocity
 ``v_cm = sum m_b v_b / sum m_b``:
 
@@ -49,12 +49,13 @@ import numpy as np
 from pydantic import NonNegativeFloat
 from pydantic.dataclasses import dataclass
 
-from .base import Stage, StepContext
+from ..step import Stage, StepContext
+from .base import Effect
 from .config import EFFECT_CONFIG
 
 
 @dataclass(frozen=True, config=EFFECT_CONFIG)
-class Contact:
+class Contact(Effect):
     """``[contact]``: ``kind`` ``"shared"`` or ``"frictional"``, with ``friction``
     (Coulomb coefficient) and ``gap`` (in grid spacings) for ``"frictional"``."""
 

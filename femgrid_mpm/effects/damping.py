@@ -7,12 +7,13 @@ from typing import Literal
 from pydantic import NonNegativeFloat
 from pydantic.dataclasses import dataclass
 
-from .base import Stage, StepContext
+from ..step import Stage, StepContext
+from .base import Effect
 from .config import EFFECT_CONFIG
 
 
 @dataclass(frozen=True, config=EFFECT_CONFIG)
-class MassDamping:
+class MassDamping(Effect):
     """``[damping] kind = "mass"``, ``coefficient = c`` (1/s).
 
     Acts on the grid velocity with the step's own mass (lumped or

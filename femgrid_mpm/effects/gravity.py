@@ -7,12 +7,13 @@ from typing import Literal
 import numpy as np
 from pydantic.dataclasses import dataclass
 
-from .base import Stage, StepContext
+from ..step import Stage, StepContext
+from .base import Effect
 from .config import EFFECT_CONFIG
 
 
 @dataclass(frozen=True, config=EFFECT_CONFIG)
-class Gravity:
+class Gravity(Effect):
     """``[[loads]] kind = "gravity"``: ``acceleration = [gx, gy]`` (m/s^2)."""
 
     kind: Literal["gravity"]

@@ -8,12 +8,13 @@ import numpy as np
 from pydantic import NonNegativeFloat
 from pydantic.dataclasses import dataclass
 
-from .base import Stage, StepContext
+from ..step import Stage, StepContext
+from .base import Effect
 from .config import EFFECT_CONFIG
 
 
 @dataclass(frozen=True, config=EFFECT_CONFIG)
-class PointLoad:
+class PointLoad(Effect):
     """``[[loads]] kind = "point"``: a force on the point of ``body`` nearest ``at``.
 
     Parameters

@@ -8,12 +8,13 @@ import numpy as np
 from pydantic import Field
 from pydantic.dataclasses import dataclass
 
-from .base import Stage, StepContext
+from ..step import Stage, StepContext
+from .base import Effect
 from .config import EFFECT_CONFIG
 
 
 @dataclass(frozen=True, config=EFFECT_CONFIG)
-class Support:
+class Support(Effect):
     """``[[supports]]``: ``where`` selects nodes, ``fix`` the components held at zero.
 
     Parameters
@@ -33,19 +34,23 @@ class Support:
     stage = Stage.CONSTRAIN
 
     def bind(self, simulation):
-        nodes = simulation.grid.nodes_where(self.where)
-        if len(nodes) == 0:
-            raise ValueError(f"support where = {self.where!r} selects no grid node")
-        components = np.array(sorted({"x": 0, "y": 1}[c] for c in self.fix))
-        rows, columns = np.ix_(nodes, components)
+        rows, columns = self._degrees_of_freedom(simulation.grid)
 
         def fix_nodes(ctx: StepContext) -> None:
             ctx.target[..., rows, columns] = 0.0  # every field, with one per body
 
-        fix_nodes.nodes = nodes  # type: ignore[attr-defined]
-        # known before any step, so that a coupled (consistent) mass solve can
-        # leave these degrees of freedom out instead of zeroing them afterwards
-        fixed = np.zeros((simulation.grid.n_nodes, 2), dtype=bool)
-        fixed[rows, columns] = True
-        fix_nodes.fixed = fixed  # type: ignore[attr-defined]
         return fix_nodes
+
+    def fixed(self, grid) -> np.ndarray:
+        rows, columns = self._degrees_of_freedom(grid)
+        fixed = np.zeros((grid.n_nodes, 2), dtype=bool)
+        fixed[rows, columns] = True
+        return fixed
+
+    def _degrees_of_freedom(self, grid) -> tuple[np.ndarray, np.ndarray]:
+        """The selected nodes and components, as ``np.ix_`` index arrays."""
+        nodes = grid.nodes_where(self.where)
+        if len(nodes) == 0:
+            raise ValueError(f"support where = {self.where!r} selects no grid node")
+        components = np.array(sorted({"x": 0, "y": 1}[c] for c in self.fix))
+        return np.ix_(nodes, components)

@@ -1,29 +1,11 @@
-"""The two engines of the step's transfers: scipy (the reference) and numba (the default).
+"""The numba engine: the step's transfers as compiled kernels over the points.
 
-:meth:`femgrid_mpm.solver.Simulation.advance` is written once against this
-interface (``[solver] engine`` picks the implementation):
-
-``to_grid(ctx, mass) -> relative momentum``
-    P2G: shape functions at the points, the grid mass (``mass`` is
-    assembled), ``N.T @ (m_p (v_p - v_ref))``.
-``internal_force(ctx, dt, materials, body_slices) -> force``
-    Strain increment from the grid velocity (Eq. 18), each body's material
-    update (Eq. 6), ``-(dNdx.T @ V sigma_x + dNdy.T @ V sigma_y)`` (Eq. 11).
-``to_points(ctx, dt) -> checksum``
-    G2P: ``v += dt N @ a``, ``x += dt (N @ v_rel + v_ref)``, density (Eqs.
-    19-21); returns ``sum(v) + sum(x) + sum(stress)`` for the finiteness check.
-
-A mass model with its own transfer weights (``mass.weights``, HRZ: see
-:class:`femgrid_mpm.mass.HrzMass`) has them replace ``N`` in the P2G
-momentum and the G2P velocity increment; gradients and positions keep
-``N``.  The compiled kernels compute the HRZ weights point by point; a
-model that needs the matrices themselves (``needs_matrices``) is assembled
-from them.
-
-:class:`ScipyTransfer` spells the paper's sparse linear algebra out with
-``scipy.sparse`` matrices; :class:`CompiledTransfer` runs the kernels of
-:mod:`.transfer` and builds the matrices ``ctx.N``, ``ctx.dNdx``,
-``ctx.dNdy`` only if an effect reads them.
+:class:`CompiledTransfer` runs the kernels of :mod:`femgrid_mpm.kernels` and
+builds the matrices ``ctx.N``, ``ctx.dNdx``, ``ctx.dNdy`` only if an effect
+reads them.  What P2G sums besides mass and momentum the mass model declares
+(:class:`femgrid_mpm.mass.Assembly`): the nodal volumes, the consistent
+matrix into the grid's fixed pattern, or the HRZ weights, which the kernels
+compute point by point.
 """
 
 from __future__ import annotations
@@ -32,56 +14,17 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from ..effects.base import StepContext
+from ..kernels import parallel
+from ..kernels import transfer as kernels
+from ..kernels.basis import evaluate_shape_functions, separated_tables
+from ..kernels.pattern import mass_pattern
+from ..mass import NodalSums
 from ..materials import LinearElastic
-from . import parallel
-from . import transfer as kernels
-from .basis import evaluate_shape_functions, separated_tables
-from .pattern import mass_pattern
+from ..step import StepContext
+from .engine import Engine
 
 
-class ScipyTransfer:
-    """The reference engine: shape-function matrices and scipy.sparse products."""
-
-    name = "scipy"
-
-    def __init__(self, simulation):
-        self.grid = simulation.grid
-        self._divergence = None
-
-    def context(self, simulation, dt: float) -> StepContext:
-        return StepContext(simulation, dt=dt)
-
-    def to_grid(self, ctx: StepContext, mass) -> np.ndarray:
-        p = ctx.particles
-        ctx.N, ctx.dNdx, ctx.dNdy = self.grid.shape_functions(p.x)  # ValueError if a point left the grid
-        mass.assemble(ctx.N, p.mass, p.volume)
-        return ctx.transfer_weights.T @ (p.mass[:, None] * (p.v - ctx.frame_velocity))
-
-    def internal_force(self, ctx: StepContext, dt: float, materials, body_slices) -> np.ndarray:
-        p = ctx.particles
-        relative_velocity = ctx.velocity - ctx.frame_velocity  # gradients sum to zero: same gradient
-        dv_dx = ctx.dNdx @ relative_velocity  # (n, 2): d(vx)/dx, d(vy)/dx
-        dv_dy = ctx.dNdy @ relative_velocity  # (n, 2): d(vx)/dy, d(vy)/dy
-        strain_increment = dt * np.column_stack([dv_dx[:, 0], dv_dy[:, 1], 0.5 * (dv_dy[:, 0] + dv_dx[:, 1])])
-        gradient_increment = dt * np.column_stack([dv_dx[:, 0], dv_dy[:, 0], dv_dx[:, 1], dv_dy[:, 1]])  # dt L
-        p.strain += strain_increment
-        for material, members in zip(materials, body_slices):
-            material.update(p, members, strain_increment, gradient_increment)
-        self._divergence = dv_dx[:, 0] + dv_dy[:, 1]
-        weighted_stress = p.volume[:, None] * p.stress  # volumes of time t
-        return -(ctx.dNdx.T @ weighted_stress[:, [0, 2]] + ctx.dNdy.T @ weighted_stress[:, [2, 1]])
-
-    def to_points(self, ctx: StepContext, dt: float) -> float:
-        p = ctx.particles
-        relative_velocity = ctx.velocity - ctx.frame_velocity
-        p.v += dt * (ctx.transfer_weights @ ctx.acceleration)
-        p.x += dt * (ctx.N @ relative_velocity + ctx.frame_velocity)
-        p.density *= np.exp(-dt * self._divergence)
-        return p.v.sum() + p.x.sum() + p.stress.sum()
-
-
-class CompiledTransfer:
+class CompiledTransfer(Engine):
     """The numba engine: fused kernels over the points, buffers reused from step to step."""
 
     name = "numba"
@@ -111,17 +54,15 @@ class CompiledTransfer:
         self.matrices = ShapeFunctionMatrices(grid, self.basis)
         n, n_nodes = simulation.particles.n, grid.n_nodes
         self._grid_shape = (n_nodes, 2)  # of the fields a step returns (a property call less per step)
+        assembly = simulation.mass.assembly
         # HRZ: the kernels weigh momentum and velocity increments by W = N^2 / sum N^2
-        self.hrz = hasattr(simulation.mass, "assemble_hrz")
+        self.hrz = assembly.hrz_weights
         self.grid_mass = np.zeros(n_nodes)
         # |N|.T @ m_p (signed bases), or the HRZ diagonal W.T @ m_p
         self.grid_absolute = np.zeros(n_nodes if self.signed or self.hrz else 1)
         # N.T @ V_p: consistent mass (weak nodes) and the lumped mass threshold
-        self.want_volume = bool(getattr(simulation.mass, "needs_volume", False))
+        self.want_volume = assembly.node_volume
         self.grid_volume = np.zeros(n_nodes if self.want_volume else 1)
-        # a mass model that needs N itself is assembled from the matrices
-        self.from_matrices = bool(getattr(simulation.mass, "needs_matrices", False))
-        self._no_acceleration = np.zeros((n_nodes, 2))
         # per point, from the force pass to G2P: div v and N @ v_rel of the step's start
         self.start_motion = np.zeros((n, 3))
         self._relative = np.zeros((n_nodes, 2))
@@ -129,15 +70,23 @@ class CompiledTransfer:
         self._stress_total = 0.0
         # consistent mass: assembled in the P2G pass into a pattern fixed per grid
         self.pattern = None
-        if hasattr(simulation.mass, "assemble_pattern"):
+        if assembly.matrix:
             connectivity = tables.connectivity
             self.pattern = mass_pattern(grid, connectivity)
             self._ordered = family == "tensor" and _ordered_slots(self.pattern, len(tables.marker))
             self.want_volume = True
             self.grid_volume = np.zeros(n_nodes)
+        # what P2G hands the mass model: these buffers, refilled every step
+        self._sums = NodalSums(
+            mass=self.grid_mass,
+            absolute=self.grid_absolute if self.signed and not self.hrz else None,
+            hrz=self.grid_absolute if self.hrz else None,
+            volume=self.grid_volume if self.want_volume else None,
+            pattern=self.pattern,
+        )
         # threads: chunked variants of the tensor and folded kernels (lumped P2G, linear elastic stress,
         # G2P), whose serial kernel the basis' form picks (None: tensor)
-        threads = int(getattr(simulation.scene.solver, "threads", 1))
+        threads = simulation.scene.solver.threads
         self.threads = min(threads, numba.config.NUMBA_NUM_THREADS) if family in ("tensor", "folded") else 1
         # the threaded kernels' arguments: a form before the connectivity (the fold's place), None for tensor bases
         self._chunked_arrays = (*self._arrays[:-1], None, self._arrays[-1]) if family == "tensor" else self._arrays
@@ -159,11 +108,7 @@ class CompiledTransfer:
     def to_grid(self, ctx: StepContext, mass) -> np.ndarray:
         p = ctx.particles
         self.matrices.invalidate()
-        if self.hrz:
-            mass.forget_weights()
-        if self.from_matrices:  # N built by the kernel (ValueError if a point left the grid), then scipy products
-            mass.assemble(ctx.N, p.mass, p.volume)
-            return ctx.transfer_weights.T @ (p.mass[:, None] * (p.v - ctx.frame_velocity))
+        mass.points_moved()
         momentum = np.empty(self._grid_shape)
         pattern = self.pattern
         if self.threads > 1 and pattern is None and not self.want_volume:
@@ -184,15 +129,7 @@ class CompiledTransfer:
         if outside >= 0:
             self.grid.locate(p.x)  # raises the ValueError naming the points outside
             raise AssertionError(f"point {outside} is outside the grid")  # pragma: no cover
-        if pattern is not None:  # consistent: M assembled into the pattern
-            mass.assemble_pattern(pattern, self.grid_mass, self.grid_volume)
-        elif self.hrz:
-            mass.assemble_hrz(self.grid_mass, self.grid_absolute)
-        elif hasattr(mass, "assemble_sums"):
-            mass.assemble_sums(self.grid_mass, self.grid_absolute if self.signed else None,
-                               self.grid_volume if self.want_volume else None)
-        else:  # a mass model that needs the matrices
-            mass.assemble(ctx.N, p.mass, p.volume)
+        mass.assemble_sums(self._sums)
         return momentum
 
     def internal_force(self, ctx: StepContext, dt: float, materials, body_slices) -> np.ndarray:
@@ -223,10 +160,7 @@ class CompiledTransfer:
 
     def to_points(self, ctx: StepContext, dt: float) -> float:
         p = ctx.particles
-        # a model assembled from the matrices: the kernel moves the points (N) with no acceleration,
-        # its transfer weights carry the acceleration after
-        acceleration = self._no_acceleration if self.from_matrices else ctx.acceleration
-        increment = dt * (ctx.transfer_weights @ ctx.acceleration) if self.from_matrices else None
+        acceleration = ctx.acceleration
         if self.threads > 1:
             total = parallel.parallel_g2p(p.x, p.v, p.density, acceleration, ctx.frame_velocity,
                                           dt, self.start_motion, self.hrz, *self._chunked_arrays, self.threads)
@@ -234,11 +168,7 @@ class CompiledTransfer:
             total = self._g2p(p.x, p.v, p.density, acceleration, ctx.frame_velocity, dt,
                               self.start_motion, self.hrz, *self._arrays)
         self.matrices.invalidate()  # the points moved
-        if self.hrz:
-            ctx.mass.forget_weights()
-        if increment is not None:
-            p.v += increment
-            total += float(increment.sum())
+        ctx.mass.points_moved()
         return total + self._stress_total
 
 
@@ -329,5 +259,3 @@ class OnDemandContext(StepContext):
     dNdy = _matrix(2)
     del _matrix
 
-
-TRANSFERS = {"scipy": ScipyTransfer, "numba": CompiledTransfer}

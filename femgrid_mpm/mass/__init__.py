@@ -1,0 +1,82 @@
+"""Grid mass: lumped (paper Eqs. 15-16), HRZ, consistent (Eqs. 10, 17, 19, 20) and per body.
+
+Every model implements :class:`~.protocol.MassModel`: ``assemble`` once per
+step, then ``grid_velocity`` (Eq. 17) and ``solve`` for the nodal
+accelerations (Eq. 10).  Nodes that no point touches are *inactive*: their
+solution is zero.  What a model needs from the particle-to-grid pass it
+declares in ``assembly`` (:class:`~.protocol.Assembly`).
+
+=====================  ==========================================================
+``protocol.py``        the interface, what P2G must produce, the iteration's inertia
+``diagonal.py``        :class:`LumpedMass` (row sums, the mass threshold), :class:`HrzMass`
+``per_body.py``        :class:`FieldLumpedMass`: one lumped field per body (frictional contact)
+``consistent.py``      :class:`ConsistentMass`: weak nodes, exclusion, the singular fallback
+``system.py``          one linear system of it (components, exclusions, factors, blend)
+``direct.py``          SuperLU and its pivots, the test of singularity
+``cg.py``              preconditioned CG, compiled, and its first guess
+``preconditioners.py`` the splines' tensor Gram preconditioner and its boundary layer
+``sparse.py``          compiled products of the matrix with nodal vectors
+``exclusion.py``       weak-node lumping and exclusion, in place on the fixed pattern
+=====================  ==========================================================
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .consistent import DIRECT_LIMIT, ConsistentMass
+from .diagonal import HrzMass, LumpedMass, positive_weights
+from .per_body import FieldLumpedMass
+from .preconditioners import tensor_preconditioner
+from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
+
+__all__ = [
+    "Assembly", "ConsistentMass", "DIRECT_LIMIT", "FieldLumpedMass", "HrzMass", "Inertia", "LumpedMass", "MassModel",
+    "NodalSums", "SingularMassError", "build_mass_model", "positive_weights", "tensor_preconditioner",
+]
+
+
+def build_mass_model(solver, grid, reference_mass: float, body_slices: list, per_body: bool = False,
+                     fixed: np.ndarray | None = None, time_step: float | None = None) -> MassModel:
+    """The mass model a scene's ``[solver]`` table asks for, complete.
+
+    Parameters
+    ----------
+    solver : femgrid_mpm.scene.SolverSpec
+    grid : femgrid_mpm.Grid
+    reference_mass : float
+        Mass of one full lattice cell (kg), the scale for "empty".
+    body_slices : list of slice
+        Each body's points.
+    per_body : bool
+        One lumped field per body (frictional contact).
+    fixed : ndarray of bool, shape (n_nodes, 2), optional
+        Degrees of freedom the supports hold at zero.
+    time_step : float, optional
+        The run's step (s), for CG's first guess (None: an estimate's model).
+    """
+    if per_body:
+        return FieldLumpedMass(grid.n_nodes, reference_mass, body_slices)
+    if solver.mass == "hrz":
+        return HrzMass(grid.n_nodes, reference_mass)
+    if solver.mass == "lumped":
+        if solver.negative_mass == "threshold":
+            return LumpedMass(grid.n_nodes, reference_mass, threshold=solver.mass_threshold,
+                              node_integrals=grid.node_integrals)
+        return LumpedMass(grid.n_nodes, reference_mass)
+    return ConsistentMass(
+        grid.n_nodes,
+        reference_mass,
+        node_integrals=grid.node_integrals,
+        nonnegative=grid.nonnegative,
+        weak_fraction=solver.weak_fraction,
+        tolerance=solver.cg_tolerance,
+        linear_solver=solver.linear_solver,
+        fallback=solver.consistent_fallback,
+        blend=solver.blend,
+        fixed=fixed,
+        preconditioner=tensor_preconditioner(grid),
+        lattice=None if grid.nonnegative else grid.lattice_indices,
+        layer_width=round(grid.discretization.element_width / grid.spacing),  # in lattice steps
+        time_step=time_step,
+    )

@@ -1,0 +1,70 @@
+"""One linear system of the consistent mass: the matrix for some of the two components with
+its excluded degrees of freedom as identity rows, its factors or CG's boundary layer, and
+the blend that replaces it where it is singular."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .direct import _factor
+from .exclusion import _exclude_in_place
+from .preconditioners import BoundaryLayer
+from .sparse import _CompiledCSR
+
+
+@dataclass
+class _System:
+    """The consistent matrix for some of the two components, with the excluded
+    degrees of freedom (empty or fixed) replaced by identity rows."""
+
+    columns: list
+    excluded: np.ndarray
+    matrix: sp.csr_matrix
+    inverse_diagonal: np.ndarray
+    factors: object
+    blended: bool = False
+    _layer: "BoundaryLayer | None | bool" = False  # False: not built yet
+    #: CG on a signed basis: whether the block near the edges is singular (None: not checked
+    #: yet this step) and the node of its smallest pivot (:meth:`ConsistentMass._singular_near_edges`)
+    singular: bool | None = None
+    weakest: int | None = None
+
+    def boundary_layer(self, lattice_shape: tuple, weak: np.ndarray) -> "BoundaryLayer | None":
+        """CG's boundary layer (:class:`BoundaryLayer`), built at the first solve of the
+        step and shared by the velocity and acceleration solves."""
+        if self._layer is False:
+            self._layer = BoundaryLayer.build(self.matrix, self.excluded, weak, lattice_shape)
+        return self._layer
+
+    @classmethod
+    def build(cls, matrix: sp.csr_matrix, columns: list, excluded: np.ndarray, direct: bool,
+              diagonal_index: np.ndarray | None = None, in_place: bool = False) -> "_System":
+        """``in_place``: ``matrix`` has already been reduced in place (its data is the system's)."""
+        if diagonal_index is None:
+            keep = sp.diags((~excluded).astype(float))
+            reduced = (keep @ matrix @ keep + sp.diags(excluded.astype(float))).tocsr()
+            inverse_diagonal = 1.0 / reduced.diagonal()
+        else:  # the same on a structure with every diagonal entry: zero rows and columns, unit diagonal
+            data = matrix.data
+            if not in_place:  # on a copy: the other component's system needs the assembled entries too
+                data = data.copy()
+                _exclude_in_place(matrix.indptr, matrix.indices, data, diagonal_index, excluded)
+            # the index arrays are shared with the (internal) assembled matrix: nothing sorts them
+            reduced = _CompiledCSR((data, matrix.indices, matrix.indptr), shape=matrix.shape, copy=False)
+            reduced.upper_start = diagonal_index  # exclusion and lumping keep the symmetry and the order
+            inverse_diagonal = 1.0 / data[diagonal_index]
+        return cls(columns, excluded, reduced, inverse_diagonal, _factor(reduced) if direct else None)
+
+    def blend_with(self, target: np.ndarray, weight: float, direct: bool) -> None:
+        """The fallback: ``(1 - weight) M + weight diag(target)`` on the kept rows."""
+        if self.blended:
+            return
+        kept_target = np.where(self.excluded, 1.0, target)
+        self.matrix = ((1.0 - weight) * self.matrix + weight * sp.diags(kept_target)).tocsr()
+        self.inverse_diagonal = 1.0 / self.matrix.diagonal()
+        self.factors = _factor(self.matrix) if direct else None
+        self.blended = True
+        self._layer = False
