@@ -12,38 +12,10 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Callable
-
 import numpy as np
 
-from .step import Stage, StepContext
-
-
-@dataclass
-class Probe:
-    """An observer that records ``function(ctx)`` at every record step.
-
-    Pass it to :class:`femgrid_mpm.solver.Simulation` as one of its
-    ``observers``; ``times`` and ``values`` fill as the run goes.
-    """
-
-    function: Callable[[StepContext], float]
-    name: str = "probe"
-    times: list = field(default_factory=list)
-    values: list = field(default_factory=list)
-
-    stage = Stage.OBSERVE
-
-    def bind(self, simulation):
-        def record(ctx: StepContext) -> None:
-            self.times.append(ctx.time)
-            self.values.append(self.function(ctx))
-
-        return record
-
-    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        return np.asarray(self.times), np.asarray(self.values)
+from .observers.probe import Probe
+from .step import StepContext
 
 
 def modal_velocity_probe(length: float) -> Probe:

@@ -184,7 +184,7 @@ class EnergyGuard:
 @compiled()
 def points_kinetic_energy(mass: np.ndarray, velocity: np.ndarray) -> float:
     """``1/2 sum m_p v_p.v_p`` in one compiled pass (for the guard; the energy
-    records use :func:`femgrid_mpm.energy.kinetic_energy`)."""
+    records use :func:`femgrid_mpm.observers.kinetic_energy`)."""
     total = 0.0
     for p in range(mass.shape[0]):
         total += mass[p] * (velocity[p, 0] * velocity[p, 0] + velocity[p, 1] * velocity[p, 1])

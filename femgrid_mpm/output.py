@@ -57,7 +57,7 @@ from typing import Iterator
 import numpy as np
 
 from .effects.base import Stage, StepContext
-from .energy import COLUMNS
+from .observers import COLUMNS
 
 ENERGY_FILE = "energy.csv"
 FINAL_FILE = "final.npz"

@@ -26,7 +26,7 @@ from typing import Callable
 import numpy as np
 
 from .diagnostics import EnergyGuard, NegativeMassMonitor, SimulationStopped, points_kinetic_energy
-from .energy import EnergyBookkeeping, kinetic_energy
+from .observers import EnergyBookkeeping, kinetic_energy
 from .engines import engine_for
 from .expressions import compile_expression
 from .grid import Grid
@@ -49,7 +49,7 @@ class RunResult:
     message : str
         Why the run ended.
     energy : dict of ndarray or None
-        Columns of :data:`femgrid_mpm.energy.COLUMNS`, one entry per record.
+        Columns of :data:`femgrid_mpm.observers.COLUMNS`, one entry per record.
     particles : Particles
         The final (or last good) state.
     summary : dict

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .energy import COLUMNS
+from .observers import COLUMNS
 
 
 def simulation_state(simulation, now: float) -> tuple[dict, dict]:

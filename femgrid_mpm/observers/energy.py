@@ -23,7 +23,8 @@ from typing import Callable
 
 import numpy as np
 
-from .step import Stage, StepContext
+from ..effects.base import Effect
+from ..step import Stage, StepContext
 
 COLUMNS = (
     "time",
@@ -44,7 +45,7 @@ def kinetic_energy(mass: np.ndarray, velocity: np.ndarray) -> float:
 
 
 @dataclass
-class EnergyBookkeeping:
+class EnergyBookkeeping(Effect):
     """Records one row of :data:`COLUMNS` per record step.
 
     ``initial`` holds the first record's kinetic, grid kinetic and strain

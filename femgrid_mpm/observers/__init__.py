@@ -1,0 +1,13 @@
+"""Observers: effects that only read the state, at record steps (the ``observe`` stage).
+
+``energy.py``  :class:`EnergyBookkeeping`, the paper's energies and errors (Eqs. 25-32)
+``probe.py``   :class:`Probe`, one number of the state per record (e.g. a modal amplitude)
+
+The particle series for ParaView is written by :class:`femgrid_mpm.output.ParticleSeries`,
+an observer of the output.
+"""
+
+from .energy import COLUMNS, EnergyBookkeeping, kinetic_energy
+from .probe import Probe
+
+__all__ = ["COLUMNS", "EnergyBookkeeping", "Probe", "kinetic_energy"]
