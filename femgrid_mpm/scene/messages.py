@@ -190,5 +190,3 @@ def _shown(value) -> str:
 
 def _one_line(text: str) -> str:
     return " ".join(text.split("\n"))
-
-

@@ -104,5 +104,3 @@ def _list_index(text: str) -> int:
     if not text.isdigit():
         raise KeyError(text)
     return int(text)
-
-
