@@ -166,8 +166,8 @@ class Body(_Model):
         return self
 
 
-# The effects' tables, from the registry (femgrid_mpm.effects.REGISTRY): a new
-# effect is its class and one registry line, never an edit here.
+# The effects' tables, from the registry (femgrid_mpm.effects.REGISTRY): a new kind of
+# load (or of damping) is its class and one registry line, no edit here.
 #: ``[[loads]]``: a union discriminated on ``kind``
 Load = effects.table_type("loads")
 LOAD_KINDS = effects.kinds("loads")
