@@ -54,8 +54,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from pathlib import Path  # noqa: E402
-
 import femgrid_mpm.scene as scene_module  # noqa: E402
 from femgrid_mpm.diagnostics import SimulationStopped  # noqa: E402
 from femgrid_mpm.scene import Scene, bundled_scene  # noqa: E402
@@ -227,7 +225,7 @@ def paper_runs(engine: str) -> tuple[float, list]:
     rows = []
     total = 0.0
     for case in PAPER_CASES:
-        if not (Path(scene_module.__file__).parent / "scenes" / f"{case}.toml").exists():
+        if not (scene_module.BUNDLED_SCENES / f"{case}.toml").exists():
             continue
         scene = bundled_scene(case)
         for basis in BASES:

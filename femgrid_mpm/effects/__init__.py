@@ -1,17 +1,110 @@
 """Effects a scene can declare; the step runs only the ones it declares.
 
-Registry: scene ``kind`` -> class.  See :mod:`femgrid_mpm.effects.base` for
-the protocol and the stages.
+:data:`REGISTRY` lists every effect once: the scene table it is declared in
+and, in a table of several kinds, its ``kind``.  The scene's tables are built
+from it (:mod:`femgrid_mpm.scene`), and its order is the order in which the
+step runs the effects of one stage: loads, then damping, then contact and
+supports (both constrain the grid velocity; supports have the last word).
+Adding an effect: its file here, one line in :data:`REGISTRY`.  See
+:mod:`femgrid_mpm.effects.base` for the protocol and the stages.
+
+Examples
+--------
+>>> kinds("loads")
+('point', 'gravity')
+>>> tables()
+('loads', 'damping', 'contact', 'supports')
 """
 
-from ..step import Stage, StepContext
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated, Callable, Union
+
+from pydantic import Field
+
+from .base import Stage, StepContext
 from .contact import Contact
 from .damping import MassDamping
 from .gravity import Gravity
 from .point_load import PointLoad
 from .supports import Support
 
-LOADS = {"point": PointLoad, "gravity": Gravity}
-DAMPING = {"mass": MassDamping}
 
-__all__ = ["Contact", "DAMPING", "LOADS", "Gravity", "MassDamping", "PointLoad", "Stage", "StepContext", "Support"]
+@dataclass(frozen=True)
+class Entry:
+    """One effect of the registry.
+
+    effect : type
+        The effect's class; its fields are its scene keys.
+    table : str
+        The scene table (a field of :class:`femgrid_mpm.scene.Scene`) that declares it.
+    kind : str, optional
+        Its ``kind`` in a table of several kinds (the discriminator of that table).
+    acts : callable, optional
+        Whether a declared effect runs any code in the step; every declared one does if omitted.
+    """
+
+    effect: type
+    table: str
+    kind: str | None = None
+    acts: Callable[[object], bool] | None = None
+
+
+#: every effect, in the order the step runs those of one stage
+REGISTRY = (
+    Entry(PointLoad, "loads", kind="point"),
+    Entry(Gravity, "loads", kind="gravity"),
+    Entry(MassDamping, "damping", kind="mass"),
+    # shared contact is the single-field step itself: it runs no code of its own
+    Entry(Contact, "contact", acts=lambda contact: contact.kind == "frictional"),
+    Entry(Support, "supports"),
+)
+
+
+def tables() -> tuple[str, ...]:
+    """The scene tables that declare effects, in step order."""
+    return tuple(dict.fromkeys(entry.table for entry in REGISTRY))
+
+
+def entries(table: str) -> tuple[Entry, ...]:
+    """The registry's entries of one scene table, in registry order."""
+    return tuple(entry for entry in REGISTRY if entry.table == table)
+
+
+def kinds(table: str) -> tuple[str, ...]:
+    """The ``kind`` values of a table of several kinds (``()`` for a table of one effect)."""
+    return tuple(entry.kind for entry in entries(table) if entry.kind is not None)
+
+
+def table_type(table: str):
+    """The type of one item of a scene table: its effect's class, or, for several,
+    their union discriminated on ``kind`` (members in registry order)."""
+    classes = tuple(entry.effect for entry in entries(table))
+    if len(classes) == 1:
+        return classes[0]
+    return Annotated[Union[classes], Field(discriminator="kind")]
+
+
+def acts(table: str, effect) -> bool:
+    """Whether ``effect``, declared in ``table``, runs code in the step."""
+    (entry,) = [entry for entry in entries(table) if isinstance(effect, entry.effect)]
+    return entry.acts is None or entry.acts(effect)
+
+
+__all__ = [
+    "REGISTRY",
+    "Contact",
+    "Entry",
+    "Gravity",
+    "MassDamping",
+    "PointLoad",
+    "Stage",
+    "StepContext",
+    "Support",
+    "acts",
+    "entries",
+    "kinds",
+    "table_type",
+    "tables",
+]

@@ -1,0 +1,283 @@
+"""The files of a run, written so that a killed or stopped run leaves only valid files.
+
+Every file is written under a temporary name in the same directory and then
+renamed over its final name (:func:`atomic_path`): a rename within one file
+system is atomic, so a reader, or a run killed at any moment, sees either
+the previous complete file or the new complete file, never half of one.
+Files that grow during the run (``energy.csv``, ``particles.pvd``) are
+rewritten whole at most about once a second (:class:`Throttle`) and once
+more when the run ends, also when it stops on a numerical event.
+
+The outputs of a run in ``DIR`` (the contract documented in the README):
+
+``energy.csv``
+    One row per record, the first at t = 0: :data:`femgrid_mpm.observers.COLUMNS`
+    (``external_work`` only when a force effect is declared).
+``final.npz``
+    The last state of the points: ``x0, x, v, stress, strain, mass, volume,
+    body`` (and ``step``, ``time``).
+``summary.json``
+    What ran and how it ended; ``status = "running"`` until the end.
+``particles.pvd`` + ``particles/particles_STEP.vtu``
+    The points as a ParaView time series (when ``[output] particles = true``).
+``scene.toml``, ``source_scene.toml``
+    The scene as run (overrides applied, every default spelled out) and the
+    scene file as given, byte for byte.
+``checkpoint.npz``
+    With ``--checkpoint-every N``: the whole state every N steps, for
+    ``femgrid-mpm resume`` (:mod:`femgrid_mpm.checkpoint`).
+
+The package's modules: :mod:`~femgrid_mpm.output.files` (the names, atomic
+writes), :mod:`~femgrid_mpm.output.energy_csv`,
+:mod:`~femgrid_mpm.output.particle_series`, :mod:`~femgrid_mpm.output.results`
+(``final.npz``, ``summary.json``) and :mod:`~femgrid_mpm.output.toml_writer`
+(``scene.toml``); :class:`RunOutputs`, here, writes them all for one run.
+
+Examples
+--------
+>>> import tempfile, tomllib
+>>> from femgrid_mpm.scene import bundled_scene
+>>> scene = bundled_scene("vibrating_bar")
+>>> text = scene_to_toml(scene)
+>>> type(scene).model_validate(tomllib.loads(text)) == scene
+True
+>>> directory = Path(tempfile.mkdtemp())
+>>> atomic_write(directory / "note.txt", "complete")
+>>> (directory / "note.txt").read_text(), sorted(p.name for p in directory.iterdir())
+('complete', ['note.txt'])
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..step import Stage
+from ..observers import COLUMNS
+from .energy_csv import EnergyCsv
+from .files import (
+    CHECKPOINT_FILE,
+    ENERGY_FILE,
+    FINAL_FILE,
+    SCENE_FILE,
+    SERIES_DIRECTORY,
+    SERIES_FILE,
+    SERIES_PATTERN,
+    SOURCE_SCENE_FILE,
+    SUMMARY_FILE,
+    Throttle,
+    atomic_path,
+    atomic_write,
+    probe_writable,
+    shortest_text,
+)
+from .particle_series import ParticleSeries, collection_text
+from .results import json_safe, write_final_state, write_summary
+from .toml_writer import scene_to_toml
+
+__all__ = [
+    "CHECKPOINT_FILE",
+    "ENERGY_FILE",
+    "FINAL_FILE",
+    "SCENE_FILE",
+    "SERIES_DIRECTORY",
+    "SERIES_FILE",
+    "SERIES_PATTERN",
+    "SOURCE_SCENE_FILE",
+    "SUMMARY_FILE",
+    "EnergyCsv",
+    "ParticleSeries",
+    "RunOutputs",
+    "Throttle",
+    "atomic_path",
+    "atomic_write",
+    "collection_text",
+    "declared_observers",
+    "json_safe",
+    "probe_writable",
+    "scene_to_toml",
+    "shortest_text",
+    "write_final_state",
+    "write_summary",
+]
+
+# RunOutputs lives in the package module itself: it calls the writers by the names
+# they have here (femgrid_mpm.output.write_final_state, probe_writable, ...), the
+# names a caller sees and may replace (to try a full disk or a read-only directory).
+
+
+def declared_observers(scene, directory: Path, flush_seconds: float = 1.0) -> list:
+    """The output effects a scene declares (beyond energy, which the solver owns)."""
+    if scene.output is not None and scene.output.particles:
+        return [ParticleSeries(Path(directory), flush_seconds)]
+    return []
+
+
+class RunOutputs:
+    """All the files of one run in ``directory``.
+
+    Constructing touches no file, so a run can be checked (and refused) first.
+    Then :meth:`start` before the run, :meth:`finish` after it, also when it
+    stopped.
+
+    Parameters
+    ----------
+    directory : Path
+    scene : Scene
+        The scene as run.
+    source : Path, optional
+        The scene file it came from (copied verbatim to ``source_scene.toml``).
+    overrides : dict, optional
+        Dotted keys changed from the file (recorded in the summary).
+    flush_seconds : float
+        How often growing files are rewritten during the run (see :class:`Throttle`).
+    checkpoint_every : int
+        Steps between checkpoints (``checkpoint.npz``); 0: none.
+    """
+
+    def __init__(self, directory, scene, source=None, overrides=None, flush_seconds: float = 1.0, checkpoint_every: int = 0):
+        self.directory = Path(directory)
+        self.scene = scene
+        self.source = Path(source) if source is not None else None
+        self.overrides = dict(overrides or {})
+        self.flush_seconds = flush_seconds
+        self.checkpoint_every = int(checkpoint_every)
+        self.observers = declared_observers(scene, self.directory, flush_seconds)
+        self.energy: EnergyCsv | None = None
+        self.simulation = None
+
+    def start(self, simulation, source_bytes: bytes | None = None) -> None:
+        """Create the directory, clear an earlier run's outputs, write the scene and a
+        ``running`` summary, and attach ``energy.csv`` to the energy bookkeeping.
+
+        Raises
+        ------
+        OSError
+            If the directory cannot be created or written.
+        """
+        self.simulation = simulation
+        directory = self.directory
+        directory.mkdir(parents=True, exist_ok=True)
+        # every place this run writes or removes in must take a file before anything is
+        # written or removed: a failure then leaves an earlier run's outputs whole
+        series = directory / SERIES_DIRECTORY
+        for place in (directory, series) if series.is_dir() else (directory,):
+            probe_writable(place)
+        if source_bytes is None and self.source is not None:
+            source_bytes = self.source.read_bytes()
+        if source_bytes is not None:
+            atomic_write(directory / SOURCE_SCENE_FILE, source_bytes)
+        header = "The scene as run by femgrid-mpm, every default spelled out"
+        if self.source is not None:
+            header += f"\nfrom {self.source}"
+        if self.overrides:
+            header += "\nwith " + ", ".join(f"{k} = {v!r}" for k, v in self.overrides.items())
+        atomic_write(directory / SCENE_FILE, scene_to_toml(self.scene, header))
+        # An earlier run's files would mix with this run's (more particle
+        # files than records, an energy.csv of another scene): remove ours only.
+        for name in (ENERGY_FILE, FINAL_FILE, SERIES_FILE, CHECKPOINT_FILE):
+            (directory / name).unlink(missing_ok=True)
+        if series.is_dir():
+            for stale in series.iterdir():
+                if SERIES_PATTERN.match(stale.name):
+                    stale.unlink()
+        write_summary(
+            directory / SUMMARY_FILE,
+            self._summary(simulation.result("running", "the run has not ended (if it stays so, it was killed)"), None),
+        )
+        self._attach_energy(simulation)
+
+    def _attach_energy(self, simulation) -> None:
+        """``energy.csv`` with the records so far (none, or a resumed run's), written
+        at once, then fed by the energy bookkeeping."""
+        if simulation.energy is not None:
+            forced = simulation.effects[Stage.EXTERNAL_FORCE] or simulation.effects[Stage.ADJUST_FORCE]
+            columns = COLUMNS if forced else tuple(c for c in COLUMNS if c != "external_work")
+            self.energy = EnergyCsv(self.directory / ENERGY_FILE, columns, self.flush_seconds)
+            self.energy.extend(simulation.energy.rows)
+            self.energy.flush()  # the header, so the file exists from the start
+            simulation.energy.sink = self.energy.add_row
+
+    def state(self) -> dict:
+        """What the files of this run need to go on after a checkpoint (JSON):
+        where the scene came from, the overrides, the particle series so far."""
+        return {
+            "scene_file": str(self.source) if self.source is not None else None,
+            "overrides": self.overrides,
+            "checkpoint_every": self.checkpoint_every,
+            "series": [[time, name] for observer in self.observers for time, name in observer.entries],
+        }
+
+    @classmethod
+    def resumed(cls, directory, scene, state: dict, flush_seconds: float = 1.0) -> "RunOutputs":
+        """The outputs of a run in ``directory`` continued from a checkpoint with ``state``
+        (:meth:`state`); call :meth:`resume` once the simulation is restored."""
+        outputs = cls(directory, scene, source=state["scene_file"], overrides=state["overrides"],
+                      flush_seconds=flush_seconds, checkpoint_every=state["checkpoint_every"])
+        outputs._series_state = [(float(time), str(name)) for time, name in state["series"]]
+        return outputs
+
+    def resume(self, simulation) -> None:
+        """Go on writing into the directory of a checkpointed run: the scene files
+        stay, ``energy.csv`` and ``particles.pvd`` are rewritten with the records up
+        to the checkpoint (a killed run's later records are written again, the same,
+        as the run comes to them), and the summary says ``running``.
+
+        Raises
+        ------
+        OSError
+            If the directory cannot be written.
+        """
+        self.simulation = simulation
+        for observer in self.observers:
+            observer.entries[:] = self._series_state
+            observer.close()
+        write_summary(
+            self.directory / SUMMARY_FILE,
+            self._summary(simulation.result("running", "the run has not ended (if it stays so, it was killed)"), None),
+        )
+        self._attach_energy(simulation)
+
+    def finish(self, result, stop=None) -> dict:
+        """Write everything that is still pending, ``final.npz`` and ``summary.json``.
+
+        Parameters
+        ----------
+        result : RunResult
+            The run's result (for a stopped run, ``SimulationStopped.result``).
+        stop : SimulationStopped, optional
+            Why the run stopped.
+
+        Returns
+        -------
+        dict
+            The summary written.
+        """
+        if self.energy is not None:
+            self.energy.flush()
+        for observer in self.observers:
+            observer.close()
+        write_final_state(self.directory / FINAL_FILE, result.particles, self.simulation.step_index, self.simulation.time)
+        summary = self._summary(result, stop)
+        write_summary(self.directory / SUMMARY_FILE, summary)
+        return summary
+
+    def _summary(self, result, stop) -> dict:
+        summary = dict(result.summary)
+        summary["scene_file"] = str(self.source) if self.source is not None else None
+        summary["overrides"] = self.overrides
+        if self.energy is not None:
+            summary["records"] = len(self.energy.lines) - 1
+        else:
+            summary["records"] = len(self.observers[0].entries) if self.observers else 0
+        summary["stop"] = (
+            None if stop is None else {"reason": stop.reason, "step": stop.step, "time": stop.time, "message": str(stop)}
+        )
+        names = [SCENE_FILE, SUMMARY_FILE]
+        names += [SOURCE_SCENE_FILE] if self.source is not None else []
+        names += [ENERGY_FILE] if self.energy is not None else []
+        names += [SERIES_FILE] if self.observers else []
+        names += [FINAL_FILE] if result.status != "running" else []
+        # a checkpoint is written every N steps: a run shorter than N has none
+        names += [CHECKPOINT_FILE] if self.checkpoint_every and (self.directory / CHECKPOINT_FILE).exists() else []
+        summary["files"] = sorted(names)
+        return summary

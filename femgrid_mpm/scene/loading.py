@@ -1,0 +1,60 @@
+"""Scene files: reading and validating one, and the scenes shipped with the package."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .messages import _one_line, _shown
+from .models import Scene
+from .validation import SceneError, validated
+
+#: the scene files shipped with the package (also ``scenes/`` at the repository's top level)
+BUNDLED_SCENES = Path(__file__).parent.parent / "scenes"
+
+
+def load_scene(path, overrides: dict | None = None) -> Scene:
+    """Read and validate a TOML scene file.
+
+    Parameters
+    ----------
+    path : str or Path
+    overrides : dict, optional
+        Dotted keys into the file (list items by index) and their values,
+        set in the file's data before it is validated:
+        ``{"grid.basis": "q2", "bodies.0.points_per_cell": 4}``.
+
+    Raises
+    ------
+    SceneError
+        One line: ``FILE: KEY: problem`` (the first problem found).  Besides
+        pydantic's checks, a value of the wrong TOML type that pydantic
+        would convert (``spacing = "0.5"``, ``spacing = true``,
+        ``particles = 1``) is refused.
+    """
+    import tomllib
+
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            data = tomllib.load(handle)
+    except FileNotFoundError:
+        raise SceneError(f"{path}: no such scene file") from None
+    except IsADirectoryError:
+        raise SceneError(f"{path}: is a directory, not a scene file") from None
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError(_one_line(f"{path}: not valid TOML: {error}")) from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise SceneError(_one_line(f"{path}: cannot be read: {error}")) from None
+    source = str(path)
+    if overrides:
+        if not isinstance(overrides, dict):
+            raise SceneError(f"{source}: overrides must be a dict of dotted keys and values, "
+                             f"got {type(overrides).__name__}")
+        source += " (with " + ", ".join(f"{key} = {_shown(value)}" for key, value in overrides.items()) + ")"
+    return validated(Scene, data, overrides or {}, source)
+
+
+def bundled_scene(name: str) -> Scene:
+    """One of the scenes shipped with the package (``femgrid_mpm/scenes/NAME.toml``,
+    also reachable as ``scenes/`` at the repository's top level)."""
+    return load_scene(BUNDLED_SCENES / f"{name}.toml")
