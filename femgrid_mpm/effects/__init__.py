@@ -11,7 +11,7 @@ Adding an effect: its file here, one line in :data:`REGISTRY`.  See
 Examples
 --------
 >>> kinds("loads")
-('point', 'gravity')
+('point', 'gravity', 'body_force')
 >>> tables()
 ('loads', 'damping', 'contact', 'supports')
 """
@@ -24,6 +24,7 @@ from typing import Annotated, Callable, Union
 from pydantic import Field
 
 from .base import Stage, StepContext
+from .body_force import BodyForce
 from .contact import Contact
 from .damping import MassDamping
 from .gravity import Gravity
@@ -55,6 +56,7 @@ class Entry:
 REGISTRY = (
     Entry(PointLoad, "loads", kind="point"),
     Entry(Gravity, "loads", kind="gravity"),
+    Entry(BodyForce, "loads", kind="body_force"),
     Entry(MassDamping, "damping", kind="mass"),
     # shared contact is the single-field step itself: it runs no code of its own
     Entry(Contact, "contact", acts=lambda contact: contact.kind == "frictional"),
@@ -94,6 +96,7 @@ def acts(table: str, effect) -> bool:
 
 __all__ = [
     "REGISTRY",
+    "BodyForce",
     "Contact",
     "Entry",
     "Gravity",
