@@ -11,7 +11,7 @@ import scipy.sparse.linalg as spla
 
 from femgrid_mpm import Grid
 from femgrid_mpm.bases import BASES
-from femgrid_mpm.kernels.basis import separated_tables
+from femgrid_mpm.kernels.tables import separated_tables
 from femgrid_mpm.kernels.pattern import mass_pattern
 from femgrid_mpm.mass import (_apply_tensor, _preconditioned_cg, _symmetric_times_dense_dot,
                               tensor_preconditioner)

@@ -35,9 +35,10 @@ import scipy.sparse as sp
 from ..effects.base import StepContext
 from ..materials import LinearElastic
 from . import parallel
-from . import transfer as kernels
-from .basis import evaluate_shape_functions, separated_tables
+from .families import FAMILIES
 from .pattern import mass_pattern
+from .shape_matrices import evaluate_shape_functions
+from .tables import separated_tables
 
 
 class ScipyTransfer:
@@ -100,13 +101,10 @@ class CompiledTransfer:
             family, tables = "flat", self.basis
         self.family = family
         self._arrays = tables.arrays()
-        kind = "tensor" if family == "tensor" else "local"  # the flat and folded forms share kernels
-        (self._p2g, self._p2g_sums, self._stress_and_force, self._velocity_gradient, self._internal_force,
-         self._g2p) = (
-            getattr(kernels, f"{kind}_{name}")
-            for name in ("p2g", "p2g_sums", "linear_elastic_stress_and_force", "velocity_gradient", "internal_force",
-                         "g2p")
-        )
+        passes = FAMILIES["tensor" if family == "tensor" else "local"]  # the flat and folded forms share kernels
+        self._p2g, self._p2g_sums, self._g2p = passes.p2g, passes.p2g_sums, passes.g2p
+        self._stress_and_force = passes.stress_and_force
+        self._velocity_gradient, self._internal_force = passes.velocity_gradient, passes.internal_force
         self.signed = not grid.nonnegative
         self.matrices = ShapeFunctionMatrices(grid, self.basis)
         n, n_nodes = simulation.particles.n, grid.n_nodes
