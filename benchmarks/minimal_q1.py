@@ -28,7 +28,7 @@ import numpy as np
 
 from femgrid_mpm.kernels.arithmetic import fused, quotient
 from femgrid_mpm.kernels.compiled import compiled  # cached by fingerprint: it inlines the library's helpers
-from femgrid_mpm.kernels.transfer import density_factor
+from femgrid_mpm.kernels.g2p import density_factor
 
 
 @compiled(inline="always")

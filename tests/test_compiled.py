@@ -97,13 +97,13 @@ def test_a_single_module_is_its_own_root(tmp_path):
 
 
 def test_the_library_kernels_use_the_fingerprinted_directory():
-    from femgrid_mpm.kernels import transfer
+    from femgrid_mpm.kernels import g2p, p2g
 
     import femgrid_mpm.mass.cg as mass
 
-    for kernel in (transfer.tensor_p2g_sums, transfer.local_g2p, mass._compiled_cg):
+    for kernel in (p2g.tensor_p2g_sums, g2p.local_g2p, mass._compiled_cg):
         directory = Path(kernel._cache._cache_path).parent
-        assert directory.name == PREFIX + fingerprint(Path(transfer.__file__).parents[1])
+        assert directory.name == PREFIX + fingerprint(Path(p2g.__file__).parents[1])
 
 
 def test_numbas_own_cache_files_are_removed_from_the_package(tmp_path):

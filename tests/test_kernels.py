@@ -11,7 +11,8 @@ import pytest
 
 from femgrid_mpm import Grid
 from femgrid_mpm.bases import BASES
-from femgrid_mpm.kernels.basis import LINEAR, evaluate_shape_functions, separated_tables, shape_function_data
+from femgrid_mpm.kernels.shape_matrices import evaluate_shape_functions, shape_function_data
+from femgrid_mpm.kernels.tables import LINEAR, separated_tables
 from femgrid_mpm.scene import Scene
 from femgrid_mpm.solver import Simulation
 
@@ -370,7 +371,7 @@ def test_density_factor_is_exp_within_one_ulp():
 
     import numba
 
-    from femgrid_mpm.kernels.transfer import SERIES_BOUND, density_factor
+    from femgrid_mpm.kernels.g2p import SERIES_BOUND, density_factor
 
     @numba.njit
     def factors(arguments, out):

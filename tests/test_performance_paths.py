@@ -11,7 +11,7 @@ import scipy.sparse.linalg as spla
 
 from femgrid_mpm import Grid
 from femgrid_mpm.bases import BASES
-from femgrid_mpm.kernels.basis import separated_tables
+from femgrid_mpm.kernels.tables import separated_tables
 from femgrid_mpm.kernels.pattern import mass_pattern
 from femgrid_mpm.mass.cg import _preconditioned_cg
 from femgrid_mpm.mass.preconditioners import _apply_tensor, tensor_preconditioner

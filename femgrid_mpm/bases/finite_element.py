@@ -12,7 +12,7 @@ The grid numbers the nodes along the lattice, column by column (x, then
 y), not as scikit-fem numbers its degrees of freedom (vertices, then edges
 by facet index, then centres): a node of element ``(ix, iy)`` is then an
 affine function of ``ix`` and ``iy``, which the compiled kernels compute
-instead of reading (:func:`femgrid_mpm.kernels.basis.lattice_numbering`).
+instead of reading (:func:`femgrid_mpm.kernels.tables.lattice_numbering`).
 ``Discretization.dofs`` keeps scikit-fem's number of each node.
 """
 

@@ -15,9 +15,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..kernels import parallel
-from ..kernels import transfer as kernels
-from ..kernels.basis import evaluate_shape_functions, separated_tables
+from ..kernels.families import FAMILIES
 from ..kernels.pattern import mass_pattern
+from ..kernels.shape_matrices import evaluate_shape_functions
+from ..kernels.tables import separated_tables
 from ..mass import NodalSums
 from ..materials import LinearElastic
 from ..step import StepContext
@@ -43,13 +44,10 @@ class CompiledTransfer(Engine):
             family, tables = "flat", self.basis
         self.family = family
         self._arrays = tables.arrays()
-        kind = "tensor" if family == "tensor" else "local"  # the flat and folded forms share kernels
-        (self._p2g, self._p2g_sums, self._stress_and_force, self._velocity_gradient, self._internal_force,
-         self._g2p) = (
-            getattr(kernels, f"{kind}_{name}")
-            for name in ("p2g", "p2g_sums", "linear_elastic_stress_and_force", "velocity_gradient", "internal_force",
-                         "g2p")
-        )
+        passes = FAMILIES["tensor" if family == "tensor" else "local"]  # the flat and folded forms share kernels
+        self._p2g, self._p2g_sums, self._g2p = passes.p2g, passes.p2g_sums, passes.g2p
+        self._stress_and_force = passes.stress_and_force
+        self._velocity_gradient, self._internal_force = passes.velocity_gradient, passes.internal_force
         self.signed = not grid.nonnegative
         self.matrices = ShapeFunctionMatrices(grid, self.basis)
         n, n_nodes = simulation.particles.n, grid.n_nodes
@@ -173,7 +171,7 @@ class CompiledTransfer(Engine):
 
 
 def _ordered_slots(pattern, n1: int) -> bool:
-    """Whether the stencil slots in tensor order are what :func:`~.transfer.tensor_p2g`'s
+    """Whether the stencil slots in tensor order are what :func:`~femgrid_mpm.kernels.p2g.tensor_p2g`'s
     fast path assumes: those of ``b = (k, l)`` seen from ``a = (i, j)`` consecutive in
     ``l``, and at least the centre exactly when ``(k, l) >= (i, j)``."""
     i, j, k, l = np.meshgrid(*(np.arange(n1),) * 4, indexing="ij")

@@ -1,11 +1,12 @@
 """``compiled``: numba's ``njit(cache=True)``, with a cache that knows what a kernel inlines.
 
 numba checks a cached kernel against the text of its own source file only.
-The kernels here inline helpers from other modules (``basis.located_weights``
-into every pass of ``transfer``, ``arithmetic.fused`` everywhere), so after an
-edit of ``basis.py`` alone numba would load the transfers compiled from its
-old text, silently (seen here: P2G kept an inside-grid test that had been
-edited out of ``basis.py``).  :func:`compiled` therefore caches every kernel in
+The kernels here inline helpers from other modules (``shape.located_weights``
+into every pass of ``p2g``, ``force`` and ``g2p``, ``arithmetic.fused``
+everywhere), so after an edit of ``shape.py`` alone numba would load the
+passes compiled from its old text, silently (seen here: P2G kept an
+inside-grid test that had been edited out of the module it inlines).
+:func:`compiled` therefore caches every kernel in
 a directory named by a fingerprint of all modules of the kernel's package
 that mention numba or this decorator: an edit of any of them gives a new
 directory and a fresh compilation (about a minute for every kernel), an
@@ -159,9 +160,9 @@ def compiled(**options):
     a source file (a REPL, a notebook cell) and a tree with no writable cache
     directory compile in every process.
 
-    >>> from femgrid_mpm.kernels import transfer
-    >>> root = _source_root(transfer.density_factor.py_func)
-    >>> transfer.density_factor._cache._cache_path.startswith(str(cache_directory(root)))
+    >>> from femgrid_mpm.kernels import g2p
+    >>> root = _source_root(g2p.density_factor.py_func)
+    >>> g2p.density_factor._cache._cache_path.startswith(str(cache_directory(root)))
     True
     """
     cache = options.pop("cache", True)

@@ -1,13 +1,14 @@
 """Threaded variants of the transfer kernels (``[solver] threads > 1``).
 
 The points are cut into ``n_chunks`` contiguous chunks, one per thread; each
-chunk runs the serial kernel of :mod:`.transfer` on its slice, scattering into
-its own copy of the grid arrays, and the copies are summed in chunk order.
+chunk runs the serial kernel of its pass (:mod:`.p2g`, :mod:`.force`,
+:mod:`.g2p`) on its slice, scattering into its own copy of the grid arrays,
+and the copies are summed in chunk order.
 The result is therefore the same from run to run for a given number of
 threads (not bit for bit the serial one: the grid sums are grouped by chunk).
 
 ``form`` picks the serial kernel at compile time: ``None`` the tensor-product
-ones (q1, q2, cubic splines), a fold (:class:`~.basis.FoldedTables`, a tuple
+ones (q1, q2, cubic splines), a fold (:class:`~.tables.FoldedTables`, a tuple
 of floats) the folded ones (serendipity).  Lumped and HRZ mass; consistent
 mass and the flat kernels (whose form, a tuple of two arrays, a parallel
 region cannot take) stay serial.
@@ -21,8 +22,9 @@ from numba import prange
 from numba.extending import overload
 
 from .compiled import compiled
-from .transfer import (local_g2p, local_linear_elastic_stress_and_force, local_p2g_sums, tensor_g2p,
-                       tensor_linear_elastic_stress_and_force, tensor_p2g_sums)
+from .force import local_linear_elastic_stress_and_force, tensor_linear_elastic_stress_and_force
+from .g2p import local_g2p, tensor_g2p
+from .p2g import local_p2g_sums, tensor_p2g_sums
 
 
 def _is_tensor(form) -> bool:

@@ -49,7 +49,7 @@ def _row_times_dense(indptr, indices, data, x, i):
     index for Python's negative wraparound on every access, and without the
     tests the consistent steps at 1e5 points ran 9-11% faster (q1 147 -> 131,
     q2 300 -> 265, cubic splines 500 -> 455 ns, together with the unsigned
-    positions of the assembly in :mod:`.kernels.transfer`)."""
+    positions of the assembly in :mod:`femgrid_mpm.kernels.p2g`)."""
     a0 = 0.0
     a1 = 0.0
     a2 = 0.0
