@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .expressions import compile_expression
 
 
 @dataclass
@@ -100,3 +103,55 @@ def count_rectangle(lower, upper, spacing: float, points_per_cell: int) -> int:
     """Number of points :func:`seed_rectangle` makes, without making them."""
     extent = np.asarray(upper, dtype=float) - np.asarray(lower, dtype=float)
     return int(np.prod(np.maximum(1, np.rint(extent * points_per_cell / spacing))))
+
+
+def seed_bodies(bodies, materials, spacing: float) -> Particles:
+    """The points of a scene's bodies (``[[bodies]]``), body by body, at rest in their
+    materials' densities with their initial velocity expressions evaluated.
+
+    Raises
+    ------
+    ValueError
+        A velocity expression that is NaN or infinite somewhere in its body.
+    """
+    parts = []
+    for index, (body, material) in enumerate(zip(bodies, materials)):
+        x, volume = seed_rectangle(body.lower, body.upper, spacing, body.points_per_cell)
+        n = len(x)
+        v = np.zeros((n, 2))
+        for axis, component in enumerate(body.velocity):
+            if isinstance(component, str):
+                v[:, axis] = compile_expression(component, ("x", "y"))(x=x[:, 0], y=x[:, 1])
+            else:
+                v[:, axis] = component
+        bad = ~np.isfinite(v).all(axis=1)
+        if bad.any():  # an expression that is NaN or infinite somewhere in the body
+            first = int(np.argmax(bad))
+            raise ValueError(f"bodies[{index}].velocity: gives NaN or infinity at {int(bad.sum())} point(s), "
+                             f"the first at ({x[first, 0]:g}, {x[first, 1]:g})")
+        parts.append(
+            Particles(
+                x=x,
+                v=v,
+                mass=np.full(n, material.density * volume),
+                density=np.full(n, material.density),
+                stress=np.zeros((n, 3)),
+                strain=np.zeros((n, 3)),
+                body=np.full(n, index, dtype=np.int32),
+                x0=x.copy(),
+            )
+        )
+    return Particles.concatenate(parts)
+
+
+def warn_of_overlaps(bodies) -> None:
+    """A warning for each pair of bodies whose rectangles overlap: their points fill the same
+    space, so the mass there is counted twice (allowed: it may be meant)."""
+    for i, first in enumerate(bodies):
+        for second in bodies[i + 1:]:
+            lower = np.maximum(first.lower, second.lower)
+            upper = np.minimum(first.upper, second.upper)
+            if np.all(upper > lower):
+                warnings.warn(f"bodies {first.name!r} and {second.name!r} overlap in [{lower[0]:g}, {lower[1]:g}] to "
+                              f"[{upper[0]:g}, {upper[1]:g}]: their points fill the same space (mass counted twice there)",
+                              RuntimeWarning, stacklevel=3)

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import functools
 import time as clock
-import warnings
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -28,11 +27,10 @@ import numpy as np
 from .diagnostics import EnergyGuard, NegativeMassMonitor, SimulationStopped, points_kinetic_energy
 from .observers import EnergyBookkeeping, kinetic_energy
 from .engines import engine_for
-from .expressions import compile_expression
 from .grid import Grid
 from .mass import MassModel, SingularMassError, build_mass_model
 from .materials import make_material
-from .particles import Particles, seed_rectangle
+from .particles import Particles, seed_bodies, warn_of_overlaps
 from .scene import Scene
 from .stability import critical_time_step
 from .state import restore_state, simulation_state
@@ -63,19 +61,6 @@ class RunResult:
     summary: dict = field(default_factory=dict)
 
 
-def _warn_of_overlaps(bodies) -> None:
-    """A warning for each pair of bodies whose rectangles overlap: their points fill the same
-    space, so the mass there is counted twice (allowed: it may be meant)."""
-    for i, first in enumerate(bodies):
-        for second in bodies[i + 1:]:
-            lower = np.maximum(first.lower, second.lower)
-            upper = np.minimum(first.upper, second.upper)
-            if np.all(upper > lower):
-                warnings.warn(f"bodies {first.name!r} and {second.name!r} overlap in [{lower[0]:g}, {lower[1]:g}] to "
-                              f"[{upper[0]:g}, {upper[1]:g}]: their points fill the same space (mass counted twice there)",
-                              RuntimeWarning, stacklevel=3)
-
-
 class Simulation:
     """A scene, built: grid, particles, materials, mass model and bound effects.
 
@@ -92,9 +77,9 @@ class Simulation:
         spec = scene.grid
         self.grid = Grid(spec.basis, spec.lower, spec.upper, spec.spacing)
         self.materials = [make_material(body.material) for body in scene.bodies]
-        self.particles = self._seed()
+        self.particles = seed_bodies(scene.bodies, self.materials, spec.spacing)
         self.body_slices = self.particles.body_slices()
-        _warn_of_overlaps(scene.bodies)
+        warn_of_overlaps(scene.bodies)
         self.reference_mass = max(m.density for m in self.materials) * spec.spacing**2
         self.every = scene.output.every if scene.output else 0
         self.energy = EnergyBookkeeping() if scene.output and scene.output.energy else None
@@ -127,36 +112,6 @@ class Simulation:
         )
 
     # -- set-up -----------------------------------------------------------------
-
-    def _seed(self) -> Particles:
-        parts = []
-        for index, (body, material) in enumerate(zip(self.scene.bodies, self.materials)):
-            x, volume = seed_rectangle(body.lower, body.upper, self.scene.grid.spacing, body.points_per_cell)
-            n = len(x)
-            v = np.zeros((n, 2))
-            for axis, component in enumerate(body.velocity):
-                if isinstance(component, str):
-                    v[:, axis] = compile_expression(component, ("x", "y"))(x=x[:, 0], y=x[:, 1])
-                else:
-                    v[:, axis] = component
-            bad = ~np.isfinite(v).all(axis=1)
-            if bad.any():  # an expression that is NaN or infinite somewhere in the body
-                first = int(np.argmax(bad))
-                raise ValueError(f"bodies[{index}].velocity: gives NaN or infinity at {int(bad.sum())} point(s), "
-                                 f"the first at ({x[first, 0]:g}, {x[first, 1]:g})")
-            parts.append(
-                Particles(
-                    x=x,
-                    v=v,
-                    mass=np.full(n, material.density * volume),
-                    density=np.full(n, material.density),
-                    stress=np.zeros((n, 3)),
-                    strain=np.zeros((n, 3)),
-                    body=np.full(n, index, dtype=np.int32),
-                    x0=x.copy(),
-                )
-            )
-        return Particles.concatenate(parts)
 
     @property
     def fields_per_body(self) -> bool:
