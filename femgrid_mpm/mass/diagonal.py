@@ -51,6 +51,8 @@ class LumpedMass(MassModel):
     nodes_below_threshold: int = field(default=0, init=False)
     #: the smallest of ``lumped`` when the compiled sums were assembled, else None
     smallest: float | None = field(default=None, init=False, repr=False)
+    #: ``1 / m_i`` on the active nodes (zero elsewhere), reused from step to step
+    _inverse: np.ndarray | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self):
         if self.threshold is not None:
@@ -79,7 +81,7 @@ class LumpedMass(MassModel):
         bases) ``|N|.T @ m_p`` and (threshold) ``N.T @ V_p``.  The arrays are
         kept, not copied."""
         lumped, absolute, volume = sums.mass, sums.absolute, sums.volume
-        if getattr(self, "_inverse", None) is None or len(self._inverse) != len(lumped):
+        if self._inverse is None or len(self._inverse) != len(lumped):
             self._inverse = np.zeros(len(lumped))
             self.active = np.zeros(len(lumped), dtype=bool)
         self.lumped = lumped

@@ -33,9 +33,8 @@ def write_final_state(path: Path, particles, step: int, time: float) -> None:
         "step": np.int64(step),
         "time": np.float64(time),
     }
-    gradient = getattr(particles, "deformation_gradient", None)
-    if gradient is not None:
-        arrays["deformation_gradient"] = gradient
+    if particles.deformation_gradient is not None:
+        arrays["deformation_gradient"] = particles.deformation_gradient
     with atomic_path(path) as temporary, temporary.open("wb") as handle:
         np.savez(handle, **arrays)
 
