@@ -24,6 +24,7 @@ from femgrid_mpm.observers import COLUMNS
 from femgrid_mpm.output import scene_to_toml
 from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
+from helpers import run_cli
 
 ROOT = Path(__file__).parents[1]
 VIBRATING_BAR = ROOT / "scenes" / "vibrating_bar.toml"
@@ -231,12 +232,6 @@ def test_resume_of_a_finished_run_is_refused_and_keeps_its_outputs(tmp_path, cap
     (line,) = capsys.readouterr().err.splitlines()
     assert line.startswith(f"femgrid-mpm: error: {out}: the run {ending} at step ") and "nothing to resume" in line
     assert output_bytes(out) == before
-
-
-def run_cli(argv, capsys):
-    code = cli.main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 @pytest.mark.parametrize("damage, words", [

@@ -32,6 +32,7 @@ from femgrid_mpm.observers import COLUMNS
 from femgrid_mpm.output import EnergyCsv, atomic_path, atomic_write, scene_to_toml
 from femgrid_mpm.scene import Scene, bundled_scene, load_scene
 from femgrid_mpm.solver import Simulation
+from helpers import run_cli
 
 ROOT = Path(__file__).parents[1]
 VIBRATING_BAR = ROOT / "scenes" / "vibrating_bar.toml"
@@ -68,12 +69,6 @@ def write_scene(directory: Path, scene: Scene, name="scene.toml") -> Path:
     path = directory / name
     path.write_text(scene_to_toml(scene))
     return path
-
-
-def run_cli(argv, capsys):
-    code = cli.main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def read_energy(path: Path) -> tuple[list[str], np.ndarray]:
@@ -563,7 +558,7 @@ def test_readme_documents_every_scene_key_option_output_and_exit_code():
     undocumented = [key for key in sorted(scene_keys()) if not any(s.format(key) in scene_section for s in spellings)]
     assert undocumented == [], "scene keys missing from README 'Scene files'"
     command_section = readme_section("Command line")
-    parser = cli._parser()
+    parser = cli.parser.build_parser()
     (commands,) = [action for action in parser._actions if isinstance(action, type(parser._subparsers._group_actions[0]))]
     for name, subparser in commands.choices.items():
         assert f"femgrid-mpm {name}" in command_section
@@ -643,10 +638,10 @@ def test_scene_larger_than_the_memory_is_refused_before_allocating(tmp_path, cap
     message); the bound is 300 B per point and 100 B per node (measured: 317-887 B)."""
     # 16 points; nodes as the size check counts them, cells + 3 per direction: 11 x 9 = 99
     need = 300 * 16 + 100 * 99
-    monkeypatch.setattr(cli, "_available_memory", lambda: need + 1.0)
+    monkeypatch.setattr(cli.scene_input, "available_memory", lambda: need + 1.0)
     path = write_scene(tmp_path, block())
     assert run_cli(["info", path], capsys)[0] == cli.EXIT_DONE
-    monkeypatch.setattr(cli, "_available_memory", lambda: 10_000.0)
+    monkeypatch.setattr(cli.scene_input, "available_memory", lambda: 10_000.0)
     code, _, err = run_cli(["info", path], capsys)
     assert code == cli.EXIT_BAD_INPUT
     (line,) = err.splitlines()
@@ -693,6 +688,6 @@ def test_ctrl_c_while_the_libraries_load_is_one_line(capsys, monkeypatch):
     def interrupted():
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(cli, "_parser", interrupted)
+    monkeypatch.setattr(cli.parser, "build_parser", interrupted)
     assert cli.main(["info", "scene.toml"]) == cli.EXIT_INTERRUPTED
     assert capsys.readouterr().err == "femgrid-mpm: interrupted: stopped by the user\n"

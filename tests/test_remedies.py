@@ -22,28 +22,23 @@ from femgrid_mpm.bases import BASES
 from femgrid_mpm.diagnostics import EnergyGuard, SimulationStopped
 from femgrid_mpm.mass import positive_weights
 from femgrid_mpm.output import scene_to_toml
-from femgrid_mpm.scene import Scene, bundled_scene
+from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
+
+import helpers
+from helpers import bundled_variant
 
 
 def block_scene(basis, mass="hrz", policy="error", velocity=(1.0, 0.25), end=1.0, **extra):
-    """A 1 x 1 block at [0.75, 1.75] x [0.5, 1.5] (its edges inside q2 elements),
-    3 x 3 points per cell, crossing 2 cells in 1 s."""
-    data = {
-        "grid": {"basis": basis, "lower": [0, 0], "upper": [4, 3], "spacing": 0.5},
-        "time": {"dt": 0.01, "end": end},
-        "solver": {"mass": mass, "negative_mass": policy},
-        "bodies": [{"name": "block", "lower": [0.75, 0.5], "upper": [1.75, 1.5], "points_per_cell": 3,
-                    "velocity": list(velocity), "material": {"E": 1e4, "nu": 0.3, "density": 1e3}}],
-        "output": {"every": 10},
-    }
-    data.update(extra)
-    return Scene.model_validate(data)
+    """The shared block (:func:`helpers.block_scene`: 1 x 1 at [0.75, 1.75] x [0.5, 1.5], its
+    edges inside q2 elements, 3 x 3 points per cell, crossing 2 cells in 1 s) with this
+    file's defaults: HRZ mass, negative masses an error, the consistent fallback the
+    scene's default."""
+    return helpers.block_scene(basis, mass, velocity, end, policy=policy, fallback=None, **extra)
 
 
 def bar(basis, mass="hrz", policy="error", **overrides):
-    settings = {"grid.basis": basis, "solver.mass": mass, "solver.negative_mass": policy, **overrides}
-    return bundled_scene("vibrating_bar").with_overrides(**settings)
+    return bundled_variant("vibrating_bar", basis, mass, policy, **overrides)
 
 
 def run(scene, observers=None):

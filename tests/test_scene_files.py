@@ -16,6 +16,7 @@ import pytest
 from femgrid_mpm import cli
 from femgrid_mpm.output import scene_to_toml
 from femgrid_mpm.scene import Scene, SceneError, bundled_scene, load_scene
+from helpers import run_cli
 
 #: a small valid scene; each case below changes one thing
 BASE = """\
@@ -179,12 +180,6 @@ BAD_BUILDS = [
     ("real power of a negative literal", replaced('"0.1*cos(pi*x/5)"', '"(-1)**0.5"'), "bodies[0].velocity",
      "NaN or infinity"),
 ]
-
-
-def run_cli(argv, capsys):
-    code = cli.main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def assert_one_line_error(err, *needles):

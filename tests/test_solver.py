@@ -13,27 +13,7 @@ from femgrid_mpm.diagnostics import SimulationStopped
 from femgrid_mpm.materials import LinearElastic
 from femgrid_mpm.scene import Scene, bundled_scene
 from femgrid_mpm.solver import Simulation
-
-
-def block_scene(basis="q1", mass="lumped", velocity=(1.0, 0.25), end=1.0, dt=0.01, **extra):
-    data = {
-        "grid": {"basis": basis, "lower": [0, 0], "upper": [4, 3], "spacing": 0.5},
-        "time": {"dt": dt, "end": end},
-        "solver": {"mass": mass, "negative_mass": "warn", "consistent_fallback": "blend"},
-        "bodies": [
-            {
-                "name": "block",
-                "lower": [0.75, 0.5],
-                "upper": [1.75, 1.5],
-                "points_per_cell": 3,
-                "velocity": list(velocity),
-                "material": {"E": 1e4, "nu": 0.3, "density": 1e3},
-            }
-        ],
-        "output": {"every": 10},
-    }
-    data.update(extra)
-    return Scene.model_validate(data)
+from helpers import block_scene
 
 
 @pytest.mark.filterwarnings("ignore::femgrid_mpm.diagnostics.NegativeMassWarning")

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from femgrid_mpm.diagnostics import SimulationStopped
-from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
 from femgrid_mpm.stability import bloch_time_step
+from helpers import bundled_variant
 
 CASES = [
     ("vibrating_bar", "q1", "lumped"),
@@ -25,8 +25,7 @@ CASES = [
 
 
 def scene(name, basis, mass, **overrides):
-    settings = {"grid.basis": basis, "solver.mass": mass, "solver.negative_mass": "warn", **overrides}
-    return bundled_scene(name).with_overrides(**settings)
+    return bundled_variant(name, basis, mass, "warn", **overrides)
 
 
 def grows(name, basis, mass, factor) -> bool:

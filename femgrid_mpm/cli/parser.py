@@ -1,0 +1,109 @@
+"""The arguments of the command line, its exit codes and its one-line messages on stderr."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+PROG = "femgrid-mpm"
+EXIT_DONE = 0
+EXIT_WRITE_FAILED = 1
+EXIT_BAD_INPUT = 2
+EXIT_STOPPED = 3
+EXIT_INTERRUPTED = 130
+EXIT_CODES = {
+    EXIT_DONE: "done",
+    EXIT_WRITE_FAILED: "the outputs could not be written during the run",
+    EXIT_BAD_INPUT: "bad input: a scene file, an argument or an output directory",
+    EXIT_STOPPED: "the simulation stopped on a numerical event; the outputs so far are valid",
+    EXIT_INTERRUPTED: "interrupted; the outputs so far are valid",
+}
+
+
+class BadInput(Exception):
+    """Input the run cannot use; the message is one line naming the file and the key."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors (exit code 2) instead of usage + error."""
+
+    def error(self, message):
+        self.exit(EXIT_BAD_INPUT, f"{PROG}: error: {message} (see {self.prog} --help)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of ``femgrid-mpm run | resume | info | reproduce``."""
+    from ..bases import BASES
+
+    parser = _Parser(
+        prog=PROG,
+        description="Material point method in 2D on finite-element background grids.",
+        epilog="Exit codes: " + "; ".join(f"{code} {meaning}" for code, meaning in EXIT_CODES.items()) + ".",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="{run,resume,info,reproduce}")
+
+    def scene_arguments(command):
+        command.add_argument("scene", metavar="SCENE.toml", help="the scene file")
+        command.add_argument("--basis", choices=list(BASES), help="override [grid] basis")
+        command.add_argument("--mass", choices=["lumped", "consistent", "hrz"], help="override [solver] mass")
+        command.add_argument(
+            "--set",
+            dest="settings",
+            action="append",
+            default=[],
+            metavar="KEY=VALUE",
+            help="override any key, dotted, list items by index, the value in TOML "
+            "(bare words are strings): --set time.end=1 --set bodies.0.points_per_cell=4 (repeatable)",
+        )
+
+    run = commands.add_parser("run", help="run a scene and write its outputs to --out")
+    scene_arguments(run)
+    run.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar (it is shown only when stderr is a terminal)")
+    run.add_argument("--checkpoint-every", type=positive_steps, default=0, metavar="N",
+                     help="write the whole state to DIR/checkpoint.npz every N steps, for femgrid-mpm resume")
+
+    resume = commands.add_parser("resume", help="continue a run from the checkpoint in its output directory")
+    resume.add_argument("directory", metavar="DIR", help="the --out directory of a run with --checkpoint-every")
+    resume.add_argument("--no-progress", action="store_true", help="no progress bar (it is shown only when stderr is a terminal)")
+
+    info = commands.add_parser("info", help="check a scene and print what a run would do")
+    scene_arguments(info)
+
+    reproduce = commands.add_parser("reproduce", help="run the paper's cases and write every figure and table")
+    reproduce.add_argument("--out", default="results", metavar="DIR", help="output directory (default: results)")
+    reproduce.add_argument("--case", action="append", default=[], metavar="NAME", help="only this case (repeatable; default: all)")
+    return parser
+
+
+def output_directory(text: str) -> Path:
+    """``--out`` as a path; raises :class:`BadInput` for an empty one (an unset
+    ``$OUT`` would mean the working directory) or one that is a file."""
+    if not text:  # (a name of spaces is a directory's name like any other)
+        raise BadInput("--out: is empty (give a directory, e.g. --out results)")
+    out = Path(text)
+    if out.exists() and not out.is_dir():
+        raise BadInput(f"--out {out}: exists and is not a directory")
+    return out
+
+
+def positive_steps(text: str) -> int:
+    """``--checkpoint-every N``: a whole number of steps, at least 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of steps, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1 (got {value})")
+    return value
+
+
+def say(kind: str, message: str) -> None:
+    """One line on stderr: ``femgrid-mpm: KIND: message``."""
+    print(f"{PROG}: {kind}: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+
+
+def show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as one line (:func:`say`), for ``warnings.showwarning``."""
+    say("warning", str(message))
