@@ -73,7 +73,9 @@ def test_a_new_basis_is_one_file_and_its_registry_line(tmp_path):
         init.write("\n" + registry)
     env = dict(os.environ, PYTHONPATH=str(tmp_path), OPENBLAS_NUM_THREADS="1")
     env.pop("NUMBA_CACHE_DIR", None)
-    done = subprocess.run([sys.executable, "-c", BAR], env=env, capture_output=True, text=True, timeout=900)
+    # from the copy's folder: `python -c` puts the working directory before PYTHONPATH
+    done = subprocess.run([sys.executable, "-c", BAR], env=env, cwd=tmp_path, capture_output=True, text=True,
+                          timeout=900)
     assert done.returncode == 0, done.stderr
     out = json.loads(done.stdout.splitlines()[-1])
     assert "bspline1" in out["registered"]
