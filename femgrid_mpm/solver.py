@@ -163,7 +163,7 @@ class Simulation:
         # Work in the frame of one point (any frame is the same in exact
         # arithmetic): a uniform motion then has zero relative velocity and
         # moves exactly, with no round-off for small or negative masses to amplify.
-        ctx.frame_velocity = p.v[0].copy()
+        ctx.frame_velocity = self.transfer.frame_velocity(p)
         try:  # P2G: N at the points, the grid mass, N.T @ (m_p (v_p - v_ref))
             relative_momentum = self.transfer.to_grid(ctx, self.mass)
         except ValueError as error:

@@ -136,13 +136,12 @@ def test_frictional_contact_conserves_momentum_and_stops_interpenetration():
     assert left_velocity[0] < right_velocity[0]  # parting: the approach stopped
 
 
-@pytest.mark.xfail(strict=True, reason="one grid field per body computes in the frame of point 0 (body 0): a node "
-                   "another body touches with a round-off weight is inactive, its velocity is body 0's, and that body "
-                   "is strained by the difference (2.7 kPa here, at step 76)")
 def test_frictional_contact_with_a_point_on_a_node_line():
     """Speeds of 1 m/s put a column of the right body's points on the node line
     x = 3 at step 75 (to 8e-15 m): its momentum must still be conserved to round-off
-    while the bodies are still 0.2 m apart and the contact does nothing."""
+    while the bodies are still 0.2 m apart and the contact does nothing (each field
+    computes in the frame of its own body's first point: in body 0's frame, a node the
+    right body touches with a round-off weight took body 0's velocity and strained it)."""
     simulation = Simulation(two_blocks({"kind": "frictional"}, velocities=((1.0, 0.2), (-1.0, 0.0))))
     p = simulation.particles
     initial = momentum(p)

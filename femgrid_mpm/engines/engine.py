@@ -32,6 +32,11 @@ class Engine(abc.ABC):
 
     name: ClassVar[str]
 
+    def frame_velocity(self, particles) -> np.ndarray:
+        """The velocity of the frame the step computes in: one point's (the first), so that
+        a uniform motion has zero relative velocity and moves exactly."""
+        return particles.v[0].copy()
+
     @abc.abstractmethod
     def context(self, simulation, dt: float) -> StepContext:
         """The step's context, made once per run."""
