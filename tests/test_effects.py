@@ -209,3 +209,16 @@ def test_particle_output_writes_the_series(tmp_path, block_scene, run_cli):
         np.testing.assert_allclose(mesh.point_data["velocity"][:, :2], v, rtol=1e-15, atol=1e-18)
         np.testing.assert_allclose(mesh.point_data["displacement"][:, :2], displacement, rtol=1e-15, atol=1e-18)
         np.testing.assert_allclose(mesh.point_data["stress_xx"], stress_xx, rtol=1e-15, atol=1e-12)
+
+
+def test_every_registry_entry_is_its_class_kind():
+    """A table of several kinds dispatches on ``kind``: each registry entry's ``kind`` must be
+    its class's own (a mismatch would route a scene's table to another class)."""
+    import typing
+
+    from femgrid_mpm.effects import REGISTRY
+
+    kinds = [entry for entry in REGISTRY if entry.kind is not None]
+    assert kinds  # the loads and damping tables have kinds
+    for entry in kinds:
+        assert typing.get_args(typing.get_type_hints(entry.effect)["kind"]) == (entry.kind,), entry
