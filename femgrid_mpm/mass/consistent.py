@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .cg import GUESS_ADVANCED, GUESS_EXTRAPOLATED, GUESS_LAST, GUESS_LUMPED, _guess, _preconditioned_cg
+from .cg import _preconditioned_cg, initial_guess
 from .direct import PIVOT_RATIO, _direct_solve, _pivots, _rows_and_block, _smallest_pivot_node
 from .exclusion import _exclude_in_place, _lump_couplings, _lump_couplings_in_place, _unexcluded_product
 from .preconditioners import TensorPreconditioner, _near_empty_nodes
@@ -371,29 +371,9 @@ class ConsistentMass(MassModel):
         return solution, converged
 
     def _initial_guess(self, rhs: np.ndarray, kind: str, system: "_System") -> np.ndarray:
-        """The velocity: the last step's grid velocity advanced by its acceleration,
-        ``v + dt a`` (in this step's frame), which the points' own update makes
-        exact while the points keep their places (at 1e5 points CG then takes
-        2 iterations instead of ~11 for q1 and q2, 9 instead of ~12 for cubic
-        splines, whose weakly supported nodes are lumped).  Otherwise linear extrapolation of
-        the last two solutions where they exist; the lumped solution elsewhere
-        (for a rigid motion that is already exact)."""
-        history = self._previous.get(kind, ())
-        accelerations = self._previous.get("acceleration", ())
-        columns = np.asarray(system.columns, dtype=np.int64)
-        none = np.zeros((0, 2))
-        if (kind == "velocity" and history and accelerations and "frame" in self._previous and self.time_step
-                and self._frame is not None):
-            mode, first, second = GUESS_ADVANCED, history[-1], accelerations[-1]
-            shift = (self._previous["frame"][0][0] - self._frame)[columns]
-        elif len(history) == 2:
-            (mode, first, second), shift = (GUESS_EXTRAPOLATED, history[1], history[0]), np.zeros(len(columns))
-        elif len(history) == 1:
-            (mode, first, second), shift = (GUESS_LAST, history[0], none), np.zeros(len(columns))
-        else:
-            (mode, first, second), shift = (GUESS_LUMPED, none, none), np.zeros(len(columns))
-        return _guess(mode, rhs, self.lumped, 1e-12 * self.reference_mass, system.inverse_diagonal, first, second,
-                      float(self.time_step or 0.0), shift, columns, system.excluded)
+        """CG's first guess from this model's history (:func:`.cg.initial_guess`)."""
+        return initial_guess(self._previous, self._frame, kind, rhs, self.lumped, 1e-12 * self.reference_mass,
+                             system, self.time_step)
 
     def _blend_target(self) -> np.ndarray:
         """Positive diagonal to blend with: the lumped masses, or where row sums
