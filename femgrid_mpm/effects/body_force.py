@@ -22,7 +22,7 @@ class BodyForce(Effect):
     """``[[loads]] kind = "body_force"``: ``acceleration = ["bx", "by"]`` (m/s^2).
 
     Each component is a number or an expression in the point's *initial*
-    position ``x``, ``y`` (m) and the time ``t`` (s), e.g. ``"-pi^2*sin(pi*x)*sin(t)"``:
+    position ``x``, ``y`` (m) and the time ``t`` (s), e.g. ``"-pi**2*sin(pi*x)*sin(t)"``:
     a body force is a property of the material, so it follows the point, as the
     fields of a manufactured solution do.  The point receives ``m_p b`` at the
     step's start time, carried to the grid as its momentum is (``N.T``, or ``W.T``
