@@ -117,7 +117,7 @@ class Simulation:
     def fields_per_body(self) -> bool:
         """One grid velocity field per body: frictional contact."""
         contact = self.scene.contact
-        return contact is not None and contact.kind == "frictional"
+        return contact is not None and contact.fields_per_body
 
     def mass_model(self, time_step: float | None = None) -> MassModel:
         """A new mass model of the scene's kind, complete with the supports' fixed degrees of

@@ -59,7 +59,7 @@ REGISTRY = (
     Entry(BodyForce, "loads", kind="body_force"),
     Entry(MassDamping, "damping", kind="mass"),
     # shared contact is the single-field step itself: it runs no code of its own
-    Entry(Contact, "contact", acts=lambda contact: contact.kind == "frictional"),
+    Entry(Contact, "contact", acts=lambda contact: contact.fields_per_body),
     Entry(Support, "supports"),
 )
 

@@ -66,6 +66,12 @@ class Contact(Effect):
     name = "contact"
     stage = Stage.CONSTRAIN
 
+    @property
+    def fields_per_body(self) -> bool:
+        """One grid field per body: frictional contact (shared contact is the single-field
+        step itself and runs no code of its own)."""
+        return self.kind == "frictional"
+
     def bind(self, simulation):
         particles = simulation.particles
         slices = simulation.body_slices

@@ -158,12 +158,11 @@ class CompiledTransfer(Engine):
 
     def to_points(self, ctx: StepContext, dt: float) -> float:
         p = ctx.particles
-        acceleration = ctx.acceleration
         if self.threads > 1:
-            total = parallel.parallel_g2p(p.x, p.v, p.density, acceleration, ctx.frame_velocity,
+            total = parallel.parallel_g2p(p.x, p.v, p.density, ctx.acceleration, ctx.frame_velocity,
                                           dt, self.start_motion, self.hrz, *self._chunked_arrays, self.threads)
         else:
-            total = self._g2p(p.x, p.v, p.density, acceleration, ctx.frame_velocity, dt,
+            total = self._g2p(p.x, p.v, p.density, ctx.acceleration, ctx.frame_velocity, dt,
                               self.start_motion, self.hrz, *self._arrays)
         self.matrices.invalidate()  # the points moved
         ctx.mass.points_moved()
