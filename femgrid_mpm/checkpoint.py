@@ -76,6 +76,30 @@ def write_checkpoint(path: Path, arrays: dict, values: dict) -> None:
             os.fsync(handle.fileno())
 
 
+def _check_sizes(path: Path) -> None:
+    """Raise ValueError unless every array's header claims no more bytes than its member
+    holds, and no member more than the file could hold: a damaged header must not
+    make the reader allocate what it claims (10^12 elements, 7 TiB)."""
+    size = path.stat().st_size
+    with zipfile.ZipFile(path) as archive:
+        for member in archive.infolist():
+            # deflate expands at most ~1032-fold; np.savez stores the members uncompressed
+            most = size if member.compress_type == zipfile.ZIP_STORED else 1032 * member.compress_size
+            if member.file_size > most:
+                raise ValueError(f"member {member.filename} claims {member.file_size} bytes, more than the file holds")
+            with archive.open(member) as handle:
+                version = np.lib.format.read_magic(handle)
+                if version == (1, 0):
+                    shape, _, dtype = np.lib.format.read_array_header_1_0(handle)
+                else:
+                    shape, _, dtype = np.lib.format.read_array_header_2_0(handle)
+                header = handle.tell()
+            claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
+            if claimed > member.file_size - header:
+                raise ValueError(f"member {member.filename}: its header claims shape {shape} of {dtype} "
+                                 f"({claimed} bytes), more than the {member.file_size - header} bytes it holds")
+
+
 def read_checkpoint(path: Path) -> tuple[dict, dict]:
     """``(arrays, values)`` of a checkpoint file.
 
@@ -89,10 +113,11 @@ def read_checkpoint(path: Path) -> tuple[dict, dict]:
     if not path.is_file():
         raise CheckpointError(f"{path}: no checkpoint here (run with --checkpoint-every N to write one)")
     try:
+        _check_sizes(path)
         with np.load(path, allow_pickle=False) as archive:
             arrays = {name: archive[name] for name in archive.files}
         values = json.loads(arrays.pop(_VALUES).tobytes().decode())
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, UnicodeDecodeError) as error:
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, UnicodeDecodeError, RecursionError) as error:
         raise CheckpointError(f"{path}: not a readable checkpoint ({type(error).__name__}: {error})") from None
     if not isinstance(values, dict) or values.get("format") != FORMAT:
         found = values.get("format") if isinstance(values, dict) else None

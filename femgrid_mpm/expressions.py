@@ -79,7 +79,8 @@ class ExpressionError(ValueError):
 Evaluator = Callable[[dict], np.ndarray]
 
 
-def compile_expression(text: str, variables: tuple[str, ...]) -> Callable[..., np.ndarray]:
+def compile_expression(text: str, variables: tuple[str, ...],
+                       constants: dict[str, float] | None = None) -> Callable[..., np.ndarray]:
     """Compile ``text`` into ``f(**values) -> ndarray`` after checking it.
 
     Parameters
@@ -88,6 +89,9 @@ def compile_expression(text: str, variables: tuple[str, ...]) -> Callable[..., n
         The expression.
     variables : tuple of str
         Names the expression may use as variables (e.g. ``("x", "y")``).
+    constants : dict of str to float, optional
+        Named numbers the expression may use besides ``pi`` and ``e`` (a scene
+        table's ``constants = { w = 1.987 }``); see :func:`check_constants`.
 
     Returns
     -------
@@ -105,8 +109,9 @@ def compile_expression(text: str, variables: tuple[str, ...]) -> Callable[..., n
         raise ExpressionError(f"cannot parse expression {text!r}: {error.msg}") from None
     if _depth(tree.body) > MAX_DEPTH:
         raise ExpressionError(f"expression nests more than {MAX_DEPTH} deep: {_shortened(text)!r}")
-    allowed = ", ".join((*variables, *CONSTANTS, *FUNCTIONS))
-    evaluate = _Compiler(text, set(variables), allowed).visit(tree.body)
+    named = {**CONSTANTS, **{name: np.float64(value) for name, value in check_constants(constants or {}, variables).items()}}
+    allowed = ", ".join((*variables, *named, *FUNCTIONS))
+    evaluate = _Compiler(text, set(variables), allowed, named).visit(tree.body)
 
     def expression(**values: np.ndarray) -> np.ndarray:
         missing = set(variables) - set(values)
@@ -121,13 +126,69 @@ def compile_expression(text: str, variables: tuple[str, ...]) -> Callable[..., n
     return expression
 
 
+def check_constants(constants: dict, variables: tuple[str, ...]) -> dict[str, float]:
+    """``constants`` checked: names that are identifiers and shadow neither a variable,
+    ``pi``/``e`` nor a function; values that are finite numbers.
+
+    >>> check_constants({"w": 2}, ("x", "t"))
+    {'w': 2.0}
+    >>> check_constants({"t": 1.0}, ("x", "t"))
+    Traceback (most recent call last):
+    ...
+    femgrid_mpm.expressions.ExpressionError: constant 't' would hide the variable 't'
+    """
+    checked = {}
+    for name, value in constants.items():
+        if not isinstance(name, str) or not name.isidentifier() or name.startswith("_"):
+            raise ExpressionError(f"constant name {name!r} is not a plain name (letters, digits, _; not starting with _)")
+        if name in variables:
+            raise ExpressionError(f"constant {name!r} would hide the variable {name!r}")
+        if name in CONSTANTS or name in FUNCTIONS:
+            raise ExpressionError(f"constant {name!r} would hide the built-in {name!r}")
+        try:
+            number = float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+        except OverflowError:
+            number = None
+        if number is None or not np.isfinite(number):
+            raise ExpressionError(f"constant {name!r} must be a finite number, got {_shortened(repr(value))}")
+        checked[name] = number
+    return checked
+
+
+def compile_vector(key: str, components, variables: tuple[str, ...], constants: dict) -> list:
+    """A scene's two-component field (numbers or expressions, e.g. a body force's
+    ``acceleration``) with its table's ``constants``: each component a number or a
+    compiled expression.  Raises ValueError naming ``constants`` or ``key[i]``."""
+    try:
+        check_constants(constants, variables)
+    except ValueError as error:
+        raise ValueError(f"constants: {error}") from None
+    compiled = []
+    for index, component in enumerate(components):
+        try:
+            compiled.append(compile_expression(component, variables, constants) if isinstance(component, str)
+                            else float(component))
+        except ValueError as error:
+            raise ValueError(f"{key}[{index}]: {error}") from None
+    return compiled
+
+
+def evaluate_vector(components: list, n: int, **values) -> np.ndarray:
+    """(n, 2): the components of :func:`compile_vector` evaluated at ``values``."""
+    field = np.empty((n, 2))
+    for axis, component in enumerate(components):
+        field[:, axis] = component(**values) if callable(component) else component
+    return field
+
+
 class _Compiler:
     """Turns a checked AST into nested closures; rejects everything else."""
 
-    def __init__(self, text: str, variables: set[str], allowed: str):
+    def __init__(self, text: str, variables: set[str], allowed: str, constants: dict[str, np.float64]):
         self.text = text
         self.variables = variables
         self.allowed = allowed
+        self.constants = constants
 
     def fail(self, what: str) -> ExpressionError:
         return ExpressionError(f"{what} is not allowed in expression {self.text!r}")
@@ -152,8 +213,8 @@ class _Compiler:
         name = node.id
         if name in self.variables:
             return lambda values: values[name]
-        if name in CONSTANTS:
-            value = CONSTANTS[name]
+        if name in self.constants:
+            value = self.constants[name]
             return lambda values: value
         raise ExpressionError(
             f"name {name!r} is not allowed in expression {self.text!r} (allowed: {self.allowed})"
@@ -207,7 +268,8 @@ class _Compiler:
         name = node.func.id
         expected = (2, 64) if name in ("min", "max") else (1, 1)
         if not expected[0] <= len(node.args) <= expected[1]:
-            raise ExpressionError(f"{name}() takes {expected[0]} argument(s), got {len(node.args)} in {self.text!r}")
+            takes = f"{expected[0]} argument" if expected == (1, 1) else f"{expected[0]} to {expected[1]} arguments"
+            raise ExpressionError(f"{name}() takes {takes}, got {len(node.args)} in {self.text!r}")
         function = FUNCTIONS[name]
         args = [self.visit(arg) for arg in node.args]
         return lambda values: function(*(arg(values) for arg in args))

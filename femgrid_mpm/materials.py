@@ -114,12 +114,15 @@ class NeoHookean(LinearElastic):
         lam, mu = self.lame_lambda, self.shear_modulus
         J = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
         b = np.matmul(F, np.swapaxes(F, 1, 2))
-        pressure_like = (lam * np.log(J) - mu) / J
-        return np.column_stack([
-            mu / J * b[:, 0, 0] + pressure_like,
-            mu / J * b[:, 1, 1] + pressure_like,
-            mu / J * b[:, 0, 1],
-        ])
+        # a crushed point (J <= 0) gives NaN here, which stops the run by name (the state is
+        # no longer finite, at that point): numpy's own warning would only come before it
+        with np.errstate(invalid="ignore", divide="ignore"):
+            pressure_like = (lam * np.log(J) - mu) / J
+            return np.column_stack([
+                mu / J * b[:, 0, 0] + pressure_like,
+                mu / J * b[:, 1, 1] + pressure_like,
+                mu / J * b[:, 0, 1],
+            ])
 
     def strain_energy(self, particles, members: slice) -> float:
         """``sum V_0 W(F)`` (J per unit thickness), ``V_0 = m / rho_0``."""
@@ -127,8 +130,9 @@ class NeoHookean(LinearElastic):
         F = particles.deformation_gradient[members]
         J = F[:, 0] * F[:, 3] - F[:, 1] * F[:, 2]
         trace_b = np.einsum("pk,pk->p", F, F)  # F_xx^2 + F_xy^2 + F_yx^2 + F_yy^2
-        log_J = np.log(J)
-        density = 0.5 * mu * (trace_b - 2.0) - mu * log_J + 0.5 * lam * log_J**2
+        with np.errstate(invalid="ignore", divide="ignore"):  # a crushed point: NaN, see cauchy_stress
+            log_J = np.log(J)
+            density = 0.5 * mu * (trace_b - 2.0) - mu * log_J + 0.5 * lam * log_J**2
         return float(np.sum(particles.mass[members] / self.density * density))
 
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .diagnostics import ScaleWarning
 from .expressions import compile_expression
 
 
@@ -92,7 +93,7 @@ def seed_rectangle(lower, upper, spacing: float, points_per_cell: int) -> tuple[
     lower = np.asarray(lower, dtype=float)
     upper = np.asarray(upper, dtype=float)
     extent = upper - lower
-    counts = np.maximum(1, np.rint(extent * points_per_cell / spacing)).astype(int)
+    counts = points_across(lower, upper, spacing, points_per_cell)
     pitch = extent / counts
     axes = [lower[k] + pitch[k] * (np.arange(counts[k]) + 0.5) for k in range(2)]
     gx, gy = np.meshgrid(*axes, indexing="ij")
@@ -101,8 +102,30 @@ def seed_rectangle(lower, upper, spacing: float, points_per_cell: int) -> tuple[
 
 def count_rectangle(lower, upper, spacing: float, points_per_cell: int) -> int:
     """Number of points :func:`seed_rectangle` makes, without making them."""
+    return int(np.prod(points_across(lower, upper, spacing, points_per_cell)))
+
+
+def points_across(lower, upper, spacing: float, points_per_cell: int) -> np.ndarray:
+    """The points :func:`seed_rectangle` puts along x and along y, shape (2,)."""
     extent = np.asarray(upper, dtype=float) - np.asarray(lower, dtype=float)
-    return int(np.prod(np.maximum(1, np.rint(extent * points_per_cell / spacing))))
+    return np.maximum(1, np.rint(extent * points_per_cell / spacing)).astype(int)
+
+
+def warn_of_thin_bodies(bodies, spacing: float, support_width: int, basis: str) -> None:
+    """A warning (:class:`~femgrid_mpm.diagnostics.ScaleWarning`) for each body with fewer
+    points across than the basis' support is wide (in grid spacings): its functions
+    are seen by the points of one side only and its strains are not resolved.  A
+    spacing in millimetres for a body in metres makes one point of every body."""
+    for index, body in enumerate(bodies):
+        counts = points_across(body.lower, body.upper, spacing, body.points_per_cell)
+        if counts.min() < support_width:
+            axis = "xy"[int(np.argmin(counts))]
+            width = float(np.subtract(body.upper, body.lower)[int(np.argmin(counts))])
+            warnings.warn(
+                f"bodies[{index}] ({body.name!r}): {counts.min()} point(s) across in {axis}, fewer than the "
+                f"{support_width} that {basis} needs (its functions' support in grid spacings): the body is "
+                f"{width:g} m wide in a grid of spacing {spacing:g} m (are both in the same units?)",
+                ScaleWarning, stacklevel=3)
 
 
 def seed_bodies(bodies, materials, spacing: float) -> Particles:
@@ -144,14 +167,51 @@ def seed_bodies(bodies, materials, spacing: float) -> Particles:
     return Particles.concatenate(parts)
 
 
+#: overlapping pairs named in the warning; the rest are counted
+SHOWN_OVERLAPS = 3
+
+
+def overlapping_pairs(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """The pairs ``(i, j)``, ``i < j``, of rectangles ``[lower, upper]`` (shape (n, 2) each)
+    that overlap with a positive area, in lexicographic order.
+
+    A sweep along x: with the rectangles sorted by their left edge, those that overlap
+    rectangle k in x are the ones after it whose left edge lies before its right edge (a
+    binary search), so the work is n log n plus the pairs that overlap in x.
+    """
+    order = np.argsort(lower[:, 0], kind="stable")
+    left, right = lower[order, 0], upper[order, 0]
+    ends = np.searchsorted(left, right, side="left")  # left[k + 1:ends[k]] < right[k]
+    pairs = []
+    for k in np.flatnonzero(ends > np.arange(len(order)) + 1):
+        others = order[k + 1:ends[k]]
+        first = order[k]
+        meets = (np.minimum(upper[first, 1], upper[others, 1]) > np.maximum(lower[first, 1], lower[others, 1])) \
+            & (np.minimum(upper[first, 0], upper[others, 0]) > np.maximum(lower[first, 0], lower[others, 0]))
+        found = others[meets]
+        pairs.append(np.column_stack([np.minimum(first, found), np.maximum(first, found)]))
+    if not pairs:
+        return np.empty((0, 2), dtype=np.intp)
+    pairs = np.concatenate(pairs)
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
 def warn_of_overlaps(bodies) -> None:
-    """A warning for each pair of bodies whose rectangles overlap: their points fill the same
-    space, so the mass there is counted twice (allowed: it may be meant)."""
-    for i, first in enumerate(bodies):
-        for second in bodies[i + 1:]:
-            lower = np.maximum(first.lower, second.lower)
-            upper = np.minimum(first.upper, second.upper)
-            if np.all(upper > lower):
-                warnings.warn(f"bodies {first.name!r} and {second.name!r} overlap in [{lower[0]:g}, {lower[1]:g}] to "
-                              f"[{upper[0]:g}, {upper[1]:g}]: their points fill the same space (mass counted twice there)",
-                              RuntimeWarning, stacklevel=3)
+    """One warning if bodies' rectangles overlap: their points fill the same space, so the
+    mass there is counted twice (allowed: it may be meant).  It names the first
+    :data:`SHOWN_OVERLAPS` pairs in scene order and counts the rest."""
+    if len(bodies) < 2:
+        return
+    lower = np.array([body.lower for body in bodies], dtype=float)
+    upper = np.array([body.upper for body in bodies], dtype=float)
+    pairs = overlapping_pairs(lower, upper)
+    if not len(pairs):
+        return
+    described = []
+    for i, j in pairs[:SHOWN_OVERLAPS]:
+        low, high = np.maximum(lower[i], lower[j]), np.minimum(upper[i], upper[j])
+        described.append(f"{bodies[i].name!r} and {bodies[j].name!r} overlap in [{low[0]:g}, {low[1]:g}] to "
+                         f"[{high[0]:g}, {high[1]:g}]")
+    more = f", and {len(pairs) - SHOWN_OVERLAPS} more pairs" if len(pairs) > SHOWN_OVERLAPS else ""
+    warnings.warn(f"bodies {'; '.join(described)}{more}: their points fill the same space (mass counted twice there)",
+                  RuntimeWarning, stacklevel=3)

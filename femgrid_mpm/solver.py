@@ -24,14 +24,17 @@ from typing import Callable
 
 import numpy as np
 
-from .diagnostics import EnergyGuard, NegativeMassMonitor, SimulationStopped, points_kinetic_energy
-from .observers import EnergyBookkeeping, kinetic_energy
+from .diagnostics import (EnergyGuard, NegativeMassMonitor, SimulationStopped, fastest_point, first_not_finite,
+                          points_kinetic_energy, warn_of_a_long_step, warn_of_energy_drift)
+from .observers import EnergyBookkeeping, energy_drift, kinetic_energy
+from .effects.base import Recorder
 from .engines import engine_for
 from .grid import Grid
-from .mass import MassModel, SingularMassError, build_mass_model
+from .mass import CellMasses, MassModel, SingularMassError, build_mass_model
 from .materials import make_material
-from .particles import Particles, seed_bodies, warn_of_overlaps
+from .particles import Particles, seed_bodies, warn_of_overlaps, warn_of_thin_bodies
 from .scene import Scene
+from .scene.limits import run_steps
 from .stability import critical_time_step
 from .state import restore_state, simulation_state
 from .step import Stage, StepContext
@@ -51,7 +54,9 @@ class RunResult:
     particles : Particles
         The final (or last good) state.
     summary : dict
-        Title, basis, mass, steps, wall time, counts, negative-mass events.
+        Title, basis, mass, steps, wall time, counts, negative-mass events,
+        ``energy_drift`` (:func:`femgrid_mpm.observers.energy_drift`, None
+        without energy records).
     """
 
     status: str
@@ -73,14 +78,15 @@ class Simulation:
     """
 
     def __init__(self, scene: Scene, observers: list | None = None):
-        self.scene = scene
+        self.scene = scene = Scene.model_validate(scene)  # a Scene as it is; a dict checked; else a SceneError
         spec = scene.grid
         self.grid = Grid(spec.basis, spec.lower, spec.upper, spec.spacing)
         self.materials = [make_material(body.material) for body in scene.bodies]
         self.particles = seed_bodies(scene.bodies, self.materials, spec.spacing)
         self.body_slices = self.particles.body_slices()
         warn_of_overlaps(scene.bodies)
-        self.reference_mass = max(m.density for m in self.materials) * spec.spacing**2
+        # "empty" and "negative" grid masses are measured against a full cell of each node's own material
+        self.cell_masses = CellMasses.of([m.density for m in self.materials], spec.spacing, self.body_slices)
         self.every = scene.output.every if scene.output else 0
         self.energy = EnergyBookkeeping() if scene.output and scene.output.energy else None
         acting = scene.declared_effects()  # in step order within each stage
@@ -89,20 +95,30 @@ class Simulation:
         self.fixed = np.logical_or.reduce(held) if held else None
         self.dt = self._time_step()
         self.mass: MassModel = self.mass_model(time_step=self.dt)
-        self.negative_mass = NegativeMassMonitor(
-            self.reference_mass, scene.solver.negative_mass, applies=self.mass.divides_by_row_sums
-        )
-        self.n_steps = int(np.ceil(scene.time.end / self.dt - 1e-9))
+        self.negative_mass = NegativeMassMonitor(scene.solver.negative_mass, applies=self.mass.divides_by_row_sums)
+        # within time.max_steps and output.max_bytes; at least one step: a step far longer
+        # than the run would otherwise round to none
+        self.n_steps = max(1, run_steps(scene, self.dt))
+        warn_of_thin_bodies(scene.bodies, spec.spacing, self.grid.definition.support_width, spec.basis)
+        warn_of_a_long_step(self.dt, scene.time, self.end_time)
         watching = [*([self.energy] if self.energy else []), *(observers or [])]
         self.effects: dict[Stage, list[tuple[str, Callable]]] = {stage: [] for stage in Stage}
         for effect in [*acting, *watching]:  # observers last: they may read dt and n_steps
             self.effects[effect.stage].append((effect.name, effect.bind(self)))
+        # the observers that keep a record of their own (the exact reference): in the summary,
+        # in a checkpoint, and their columns in the energy record (they run before it)
+        self.recorders = [action for stage in Stage for _, action in self.effects[stage] if isinstance(action, Recorder)]
+        if self.energy is not None:
+            for recorder in self.recorders:
+                self.energy.extra.update(recorder.columns())
         self.transfer = engine_for(self)
         self.context = self.transfer.context(self, self.dt)
         self.step_index = 0
         self.time = 0.0
         self.wall_time = 0.0
         self._run_started = None
+        #: "completed" or "stopped" once :meth:`run` has returned or raised (a second call is refused)
+        self.outcome: str | None = None
         # a floor of 1e-9 x sum E V: the strain energy of a strain ~4.5e-5 throughout every body
         stiffness_volume = sum(body.material.E * float(self.particles.volume[members].sum())
                                for body, members in zip(scene.bodies, self.body_slices))
@@ -123,8 +139,8 @@ class Simulation:
         """A new mass model of the scene's kind, complete with the supports' fixed degrees of
         freedom (the run's own, with its ``time_step``; the critical step estimates on one
         of its own, with None)."""
-        return build_mass_model(self.scene.solver, self.grid, self.reference_mass, self.body_slices,
-                                per_body=self.fields_per_body, fixed=self.fixed, time_step=time_step)
+        return build_mass_model(self.scene.solver, self.grid, self.cell_masses, per_body=self.fields_per_body,
+                                fixed=self.fixed, time_step=time_step)
 
     def _time_step(self) -> float:
         time = self.scene.time
@@ -135,6 +151,12 @@ class Simulation:
                 f"dt = 'auto' is impossible: {self.scene.grid.basis} with {self.scene.solver.mass} mass has no stable time step"
             )
         return time.safety * self.critical_dt
+
+    @property
+    def end_time(self) -> float:
+        """The time the run ends at (s), ``n_steps * dt``: ``time.end`` rounded up to whole steps
+        (a last step is never shortened, so a run repeats bit for bit with any end on its way)."""
+        return self.n_steps * self.dt
 
     def strain_energy(self) -> float:
         """Stored energy of all bodies (J per unit thickness), each by its own law."""
@@ -168,8 +190,8 @@ class Simulation:
             relative_momentum = self.transfer.to_grid(ctx, self.mass)
         except ValueError as error:
             raise self._stop(f"a particle left the grid: {error}", "particle_left_grid") from None
-        for lumped, smallest in self.mass.row_sums():  # one per field
-            self.negative_mass.check(lumped, ctx.step, ctx.time, self.grid.nodes, smallest)
+        for lumped, smallest, scale in self.mass.row_sums():  # one per field
+            self.negative_mass.check(lumped, scale, ctx.step, ctx.time, self.grid.nodes, smallest)
         self.negative_mass.record_below_threshold(self.mass.nodes_below_threshold, ctx.step)
         try:  # Eq. 17: v = M^-1 p_rel + v_ref, and the momentum p_rel + m v_ref
             ctx.momentum, ctx.velocity = self.mass.grid_velocity(relative_momentum, ctx.frame_velocity)
@@ -179,20 +201,33 @@ class Simulation:
         return ctx
 
     def advance(self, record: bool = False) -> None:
-        """One time step, paper section 3.2 steps 1-11."""
+        """One time step, paper section 3.2 steps 1-11: the central difference
+        u(t + dt) - 2 u(t) + u(t - dt) = dt^2 a(t) if the points' velocity is that of t + dt/2.
+
+        The paper starts from v(0), an error dt/2 a(0) kept by the motion (first order
+        in dt unless a(0) = 0); ``scheme = "centred"`` starts with the half step v(0) +
+        dt/2 a(0) and ends with one, the steps between the paper's (docs/accuracy.md).
+        """
         ctx, p, dt = self.project(), self.particles, self.dt
         if record:
             self._run(Stage.OBSERVE)
         self._guard_energy(record)
+        centred = self.scene.solver.scheme == "centred"
+        if centred and self.step_index == 0:
+            self._half_kick(ctx)
+            ctx = self.project()
         # 4-7: strain increment from the grid velocity (Eq. 18), stress (Eq. 6), internal
         # force -(dNdx.T @ V sigma_x + dNdy.T @ V sigma_y) with the volumes of time t (Eq. 11)
         ctx.force = self.transfer.internal_force(ctx, dt, self.materials, self.body_slices)
+        ctx.force_time = self.time + dt
         ctx.external = {}  # then the declared forces
         self._run(Stage.EXTERNAL_FORCE)
         self._run(Stage.ADJUST_FORCE)
         ctx.acceleration = self._solve(ctx.force, "acceleration")
         self._constrain(ctx.acceleration)
         self._book_work(ctx)
+        if centred and self.step_index == self.n_steps - 1:
+            ctx.acceleration *= 0.5  # the last velocity: that of the end time, not half a step beyond
         # 8-10 (G2P): velocity v += dt N @ a (Eq. 19) with the new forces, position
         # x += dt N @ v (Eq. 20) with the grid velocity of time t, density (Eq. 21)
         checksum = self.transfer.to_points(ctx, dt)
@@ -200,7 +235,19 @@ class Simulation:
         self.step_index += 1
         self.time = self.step_index * dt
         if not np.isfinite(checksum):
-            raise self._stop(f"the state is no longer finite (NaN or Inf){self._first_not_finite()}", "not_finite")
+            raise self._stop(f"the state is no longer finite (NaN or Inf){first_not_finite(self.particles, self.scene.bodies)}",
+                             "not_finite")
+
+    def _half_kick(self, ctx: StepContext) -> None:
+        """The centred scheme's start, ``v += dt/2 N @ a(0)``: the stress and forces of time t."""
+        ctx.force = self.transfer.internal_force(ctx, 0.0, self.materials, self.body_slices)
+        ctx.force_time = self.time
+        ctx.external = {}
+        self._run(Stage.EXTERNAL_FORCE)
+        self._run(Stage.ADJUST_FORCE)
+        acceleration = self._solve(ctx.force, "acceleration")
+        self._constrain(acceleration)
+        self.transfer.kick(ctx, 0.5 * self.dt, acceleration)
 
     def _guard_energy(self, recorded: bool) -> None:
         """The runaway-energy guard (:class:`EnergyGuard`) on what is known cheaply:
@@ -213,23 +260,9 @@ class Simulation:
             kinetic = points_kinetic_energy(self.particles.mass, self.particles.v)
             guard.check(kinetic, "the kinetic energy", ctx.work, self.step_index, self.time, self._fastest_point)
 
-    def _describe_point(self, index: int) -> str:
-        p = self.particles
-        x, x0 = p.x[index], p.x0[index]
-        return (f"point {index} of body {self.scene.bodies[p.body[index]].name!r} at ({x[0]:.6g}, {x[1]:.6g}), "
-                f"seeded at ({x0[0]:.6g}, {x0[1]:.6g})")
-
     def _fastest_point(self) -> str:
-        """Where a runaway stands out: the point of largest kinetic energy (for the stop's message)."""
-        p = self.particles
-        return f"the most kinetic energy at {self._describe_point(int(np.argmax(p.mass * np.sum(p.v**2, axis=1))))}"
-
-    def _first_not_finite(self) -> str:
-        """The first point whose position, velocity or stress is NaN or Inf (for the stop's message)."""
-        p = self.particles
-        bad = ~(np.isfinite(p.x).all(axis=1) & np.isfinite(p.v).all(axis=1) & np.isfinite(p.stress).all(axis=1))
-        found = np.flatnonzero(bad)
-        return f"; first at {self._describe_point(int(found[0]))}" if found.size else ""
+        """Where a runaway stands out (for the stop's message)."""
+        return fastest_point(self.particles, self.scene.bodies)
 
     def _solve(self, rhs: np.ndarray, kind: str) -> np.ndarray:
         try:
@@ -286,12 +319,26 @@ class Simulation:
             a run continued from it (:meth:`restore`, then :meth:`run`)
             repeats this one bit for bit.
 
+        The guards (the energy guard, the finiteness check) see every step's
+        state and the final one; a completed run warns once
+        (:class:`~femgrid_mpm.diagnostics.EnergyDriftWarning`) when its
+        ``energy_drift`` (:func:`femgrid_mpm.observers.energy_drift`) exceeds
+        :data:`~femgrid_mpm.diagnostics.ENERGY_DRIFT_LIMIT`.
+
         Raises
         ------
         SimulationStopped
             When a guard stops the run; its ``result`` holds the records and
             the state up to that step.
+        ValueError
+            If this simulation has run already (completed or stopped): it runs
+            once, to ``time.end``.
         """
+        if self.outcome is not None:
+            raise ValueError(
+                f"this simulation's run has {self.outcome} (step {self.step_index}, t = {self.time:.6g} s): a second "
+                "run() would record its final state twice; to go further, run a new Simulation of the scene with a "
+                "later end (scene.with_overrides(**{'time.end': ...}))")
         start = clock.perf_counter()
         self._run_started = start  # for the wall time in a checkpoint
         ending = "reached t = {time:.6g} s"
@@ -306,17 +353,23 @@ class Simulation:
                 if checkpoint is not None and checkpoint_every and self.step_index % checkpoint_every == 0 \
                         and self.step_index < self.n_steps:
                     checkpoint(self)
-            if self.every:
+            if self.every or self.recorders:  # the last record: the state at the end
                 self.project()
                 self._run(Stage.OBSERVE)
+            # the guards see the state the run ends with, as they saw every step's start
+            self._guard_energy(recorded=bool(self.every))
         except SimulationStopped as stop:
             self.wall_time += clock.perf_counter() - start
+            self.outcome = "stopped"
             stop.result = self.result("stopped", str(stop))
             raise
         finally:
             self._run_started = None
         self.wall_time += clock.perf_counter() - start
-        return self.result("completed", ending.format(time=self.time))
+        self.outcome = "completed"
+        result = self.result("completed", ending.format(time=self.time))
+        warn_of_energy_drift(result.summary["energy_drift"])
+        return result
 
     def _at_rest(self) -> bool:
         """The grid's mass-weighted RMS speed is below ``time.rest_speed``.
@@ -368,7 +421,10 @@ class Simulation:
             "nodes": self.grid.n_nodes,
             "effects": self.active_effects,
             "negative_mass": self.negative_mass.summary(),
+            "energy_drift": energy_drift(self.energy.rows) if self.energy else None,
         }
         summary.update(self.mass.summary())
+        for recorder in self.recorders:
+            summary.update(recorder.summary())
         energy = self.energy.table() if self.energy else None
         return RunResult(status, message, energy, self.particles, summary)

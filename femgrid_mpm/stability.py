@@ -120,6 +120,9 @@ def critical_time_step(simulation) -> float:
     :class:`~femgrid_mpm.mass.Inertia` holds both.)  The estimate assembles a mass
     model of its own (:meth:`femgrid_mpm.solver.Simulation.mass_model`), so it may be
     asked for at any time without touching the run's.
+
+    With one field per body (frictional contact) each body moves with its own
+    field's masses, so the step is the smallest of the bodies' own.
     """
     grid, p, mass_model = simulation.grid, simulation.particles, simulation.mass_model()
     N, dNdx, dNdy = grid.shape_functions(p.x)
@@ -127,24 +130,30 @@ def critical_time_step(simulation) -> float:
     for material, members in zip(simulation.materials, simulation.body_slices):
         lam, mu = material.lame_lambda, material.shear_modulus
         moduli[members] = [lam + 2 * mu, lam, lam + 2 * mu, mu]
-    stiffness = stiffness_matrix(dNdx, dNdy, p.volume, moduli)
     mass_model.assemble(N, p.mass, p.volume)
-    free = np.repeat(mass_model.active, 2)
-    if simulation.fixed is not None:
-        free &= ~simulation.fixed.ravel()
-    stiffness = stiffness[free][:, free]
+    omega_squared = 0.0
     try:
-        inertia = mass_model.inertia(N)
-        if inertia.matrix is None:  # diagonal: row sums (and the threshold's), HRZ, or per body
-            velocity_inverse, acceleration_inverse = (sp.diags(inverse) for inverse in inertia.inverses)
-            transfer = inertia.transfer
-            consistent = (transfer.T @ transfer.multiply(p.mass[:, None]).tocsr()).tocsr()
-            effective = velocity_inverse @ consistent @ acceleration_inverse
-            effective = sp.kron(effective, sp.identity(2), format="csr")[free][:, free]
-            omega_squared = largest_eigenvalue_of_product(effective, stiffness)
-        else:
-            mass = sp.kron(inertia.matrix, sp.identity(2), format="csr")[free][:, free]
-            omega_squared = largest_frequency_squared(stiffness, mass)
+        for members, active, inertia in mass_model.field_inertias(N):
+            free = np.repeat(active, 2)
+            if simulation.fixed is not None:
+                free &= ~simulation.fixed.ravel()
+            whole = members == slice(None)
+            stiffness = stiffness_matrix(dNdx if whole else dNdx[members], dNdy if whole else dNdy[members],
+                                         p.volume[members], moduli[members])[free][:, free]
+            omega_squared = max(omega_squared, _largest_frequency_squared(inertia, p.mass[members], free, stiffness))
     except (np.linalg.LinAlgError, spla.ArpackError, RuntimeError):
         return 0.0  # a singular consistent mass: some mode has no inertia
     return 2.0 / math.sqrt(omega_squared) if omega_squared > 0 else math.inf
+
+
+def _largest_frequency_squared(inertia, point_mass: np.ndarray, free: np.ndarray, stiffness: sp.csr_matrix) -> float:
+    """``omega_max^2`` of one field's iteration (see :func:`critical_time_step`)."""
+    if inertia.matrix is None:  # diagonal: row sums (and the threshold's), HRZ, or per body
+        velocity_inverse, acceleration_inverse = (sp.diags(inverse) for inverse in inertia.inverses)
+        transfer = inertia.transfer
+        consistent = (transfer.T @ transfer.multiply(point_mass[:, None]).tocsr()).tocsr()
+        effective = velocity_inverse @ consistent @ acceleration_inverse
+        effective = sp.kron(effective, sp.identity(2), format="csr")[free][:, free]
+        return largest_eigenvalue_of_product(effective, stiffness)
+    mass = sp.kron(inertia.matrix, sp.identity(2), format="csr")[free][:, free]
+    return largest_frequency_squared(stiffness, mass)

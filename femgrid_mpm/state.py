@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .observers import COLUMNS
-
 
 def simulation_state(simulation, now: float) -> tuple[dict, dict]:
     """Everything that carries from one step to the next, as ``(arrays, values)``:
@@ -19,7 +17,8 @@ def simulation_state(simulation, now: float) -> tuple[dict, dict]:
 
     The points (every array of :class:`Particles`), the step, the work
     ledger (in its order: the energy sums it in that order), the energy
-    records and their initial values, the runaway guard's bound, the
+    records and their initial values, the records of the observers that keep
+    one (:class:`~femgrid_mpm.effects.base.Recorder`), the runaway guard's bound, the
     negative-mass counters and the mass model's own history (CG's warm
     start).  Everything else is rebuilt from the scene, or recomputed
     from these at every step.
@@ -37,6 +36,7 @@ def simulation_state(simulation, now: float) -> tuple[dict, dict]:
     }
     if simulation.energy is not None:
         values["energy_initial"], arrays["energy.rows"] = simulation.energy.state()
+    arrays.update((f"records.{index}", recorder.state()) for index, recorder in enumerate(simulation.recorders))
     history = simulation.mass.state()
     if history is not None:
         mass_arrays, values["mass"] = history
@@ -61,16 +61,23 @@ def restore_state(simulation, arrays: dict, values: dict) -> None:
             raise ValueError(f"particles.{name}: shape {array.shape} {array.dtype}, this scene has {current.shape} {current.dtype}")
     if values["dt"] != simulation.dt:
         raise ValueError(f"dt {values['dt']!r} s, this scene has {simulation.dt!r} s")
-    if not 0 <= int(values["step"]) <= simulation.n_steps:
-        raise ValueError(f"step {values['step']!r}, this scene runs steps 0 to {simulation.n_steps}")
+    step, time = values["step"], values["time"]
+    if isinstance(step, bool) or not isinstance(step, int) or not 0 <= step <= simulation.n_steps:
+        raise ValueError(f"step {step!r}, this scene runs steps 0 to {simulation.n_steps}")
+    if isinstance(time, bool) or not isinstance(time, (int, float)) or not np.isfinite(time):
+        raise ValueError(f"time {time!r}: not a finite number of seconds")
     body = saved["body"]
     if body.size and not 0 <= int(body.min()) <= int(body.max()) < len(simulation.scene.bodies):
         raise ValueError(f"particles.body: indices {int(body.min())} to {int(body.max())}, "
                          f"this scene has {len(simulation.scene.bodies)} bodies")
     if simulation.energy is not None:
         rows = np.asarray(arrays["energy.rows"])
-        if rows.size and (rows.ndim != 2 or rows.shape[1] != len(COLUMNS)):
-            raise ValueError(f"energy.rows: shape {rows.shape}, the energy record has {len(COLUMNS)} columns")
+        width = len(simulation.energy.columns)
+        if rows.size and (rows.ndim != 2 or rows.shape[1] != width):
+            raise ValueError(f"energy.rows: shape {rows.shape}, the energy record has {width} columns")
+    records = [np.asarray(arrays[f"records.{index}"]) for index in range(len(simulation.recorders))]
+    for recorder, rows in zip(simulation.recorders, records):
+        recorder.restore(rows)  # checks the shape first; these go back whole or not at all
     for name, array in saved.items():
         np.copyto(getattr(p, name), array)  # in place: effects and engines may hold the arrays
     simulation.step_index, simulation.time = int(values["step"]), float(values["time"])

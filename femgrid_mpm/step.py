@@ -43,6 +43,9 @@ class StepContext:
     step: int = 0
     time: float = 0.0
     dt: float = 0.0
+    #: the instant the step's forces act (s): ``time + dt``, as the stress they are added to
+    #: is that of ``time + dt``; ``time`` for the centred scheme's starting half step
+    force_time: float = 0.0
     N: Any = None
     dNdx: Any = None
     dNdy: Any = None

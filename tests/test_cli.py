@@ -240,7 +240,9 @@ def test_info_with_overrides_and_an_unstable_time_step(tmp_path, capsys):
     """dt beyond the critical step: a one-line warning on stderr, exit 0."""
     path = write_scene(tmp_path, block())
     critical = Simulation(block()).critical_dt
-    code, stdout, err = run_cli(["info", path, "--set", f"time.dt={3 * critical!r}", "--mass", "consistent"], capsys)
+    # to t = 1 s: a step longer than the run would be warned of too
+    code, stdout, err = run_cli(["info", path, "--set", f"time.dt={3 * critical!r}", "--set", "time.end=1",
+                                 "--mass", "consistent"], capsys)
     assert code == 0
     assert info_lines(stdout)["mass"] == "consistent"
     (warning,) = err.splitlines()
@@ -511,6 +513,7 @@ def test_reproduce_runs_every_case_and_prints_its_table(tmp_path, capsys, monkey
         return run
 
     monkeypatch.setattr(reproduce, "CASES", {"first": case("first"), "second": case("second")})
+    monkeypatch.setattr(reproduce, "PLANNED_RUNS", {"first": lambda: 0, "second": lambda: 0})
     code, stdout, err = run_cli(["reproduce", "--out", tmp_path / "results"], capsys)
     assert code == 0
     assert calls == [tmp_path / "results" / "first", tmp_path / "results" / "second"]

@@ -120,7 +120,7 @@ def test_a_constant_body_force_is_gravity_bit_for_bit():
 
 
 def test_a_body_force_growing_in_time_gives_its_impulse():
-    """``b = (c t, 0)``, applied at each step's start time ``t_k = k dt``: with lumped q1 mass
+    """``b = (c t, 0)``, applied at each step's end time ``t_k = (k + 1) dt``: with lumped q1 mass
     and no supports the points' momentum gains exactly ``dt sum_k M c t_k`` in x (the nodal
     forces sum to the point forces, the lumped solve keeps ``sum m_i a_i = sum f_i``), to
     round-off (1e-12 of it), and nothing in y beyond round-off of the vibration's momentum."""
@@ -131,7 +131,7 @@ def test_a_body_force_growing_in_time_gives_its_impulse():
     simulation.run()
     after = (p.mass[:, None] * p.v).sum(axis=0)
     n, dt = simulation.step_index, simulation.dt
-    impulse = dt * p.mass.sum() * c * dt * n * (n - 1) / 2
+    impulse = dt * p.mass.sum() * c * dt * n * (n + 1) / 2
     assert abs((after[0] - before[0]) - impulse) < 1e-12 * impulse
     assert abs(after[1] - before[1]) < 1e-12 * impulse
     assert simulation.context.work["body_force"] > 0  # its work is booked

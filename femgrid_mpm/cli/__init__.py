@@ -1,4 +1,4 @@
-"""The ``femgrid-mpm`` command line: ``run``, ``resume``, ``info`` and ``reproduce``.
+"""The ``femgrid-mpm`` command line: ``run``, ``resume``, ``info``, ``reproduce``, ``sweep`` and ``report``.
 
 Exit codes (:data:`EXIT_CODES`): 0 done; 2 bad input (a scene file, an
 argument, an output directory that cannot be written), reported as one line
@@ -6,31 +6,36 @@ naming the file and the key, never a traceback, before anything is written;
 3 the simulation stopped on a numerical event (negative mass under policy
 ``"error"``, a singular consistent mass, NaN, a runaway energy, a particle
 leaving the grid), with every output written so far kept valid; 1 the outputs could not be
-written during the run (e.g. a full disk); 130 interrupted (Ctrl-C), outputs
-so far kept.  The library raises; only this package exits.
+written during the run (e.g. a full disk), or standard output could not; 130, 143, 129
+interrupted by SIGINT (Ctrl-C), SIGTERM or SIGHUP, outputs so far kept.  A closed pipe on
+standard output ends the output quietly.  The library raises; only this package exits.
 
 Its modules: :mod:`~femgrid_mpm.cli.parser` (the arguments, the exit codes,
 the one-line messages), :mod:`~femgrid_mpm.cli.scene_input` (the scene of the
 arguments, checked and built), one module per command (:mod:`~femgrid_mpm.cli.run`
 for ``run`` and ``resume``, :mod:`~femgrid_mpm.cli.info`,
-:mod:`~femgrid_mpm.cli.reproduce`) and :mod:`~femgrid_mpm.cli.progress` (the
-progress bar).  None of them loads numpy at import: the libraries load inside
+:mod:`~femgrid_mpm.cli.reproduce`, :mod:`~femgrid_mpm.cli.sweep` for ``sweep`` and ``report``),
+:mod:`~femgrid_mpm.cli.progress` (the progress bars) and :mod:`~femgrid_mpm.cli.notes` (the library's
+notes, one line each).  None of them loads numpy at import: the libraries load inside
 :func:`main`, where a Ctrl-C is one line.
 """
 
 from __future__ import annotations
 
+import sys
 import warnings
 
-from . import info, parser, reproduce, run
-from .parser import (EXIT_BAD_INPUT, EXIT_CODES, EXIT_DONE, EXIT_INTERRUPTED, EXIT_STOPPED, EXIT_WRITE_FAILED, PROG,
-                     BadInput, say, show_warning)
+from . import info, parser, reproduce, run, sweep
+from .notes import shown_notes
+from .parser import (EXIT_BAD_INPUT, EXIT_CODES, EXIT_DONE, EXIT_HANGUP, EXIT_INTERRUPTED, EXIT_STOPPED,
+                     EXIT_TERMINATED, EXIT_WRITE_FAILED, PROG, BadInput, StdoutFailed, discard, say, show_warning)
 
 __all__ = ["main", "BadInput", "PROG", "EXIT_CODES", "EXIT_DONE", "EXIT_WRITE_FAILED", "EXIT_BAD_INPUT",
-           "EXIT_STOPPED", "EXIT_INTERRUPTED"]
+           "EXIT_STOPPED", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "EXIT_HANGUP"]
 
 #: the function of each command
-COMMANDS = {"run": run.run, "resume": run.resume, "info": info.info, "reproduce": reproduce.reproduce}
+COMMANDS = {"run": run.run, "resume": run.resume, "info": info.info, "reproduce": reproduce.reproduce,
+            "sweep": sweep.sweep, "report": sweep.report}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -43,13 +48,23 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # while the libraries load (about a second)
         say("interrupted", "stopped by the user")
         return EXIT_INTERRUPTED
-    with warnings.catch_warnings():
+    except BrokenPipeError:  # --help into a closed pipe
+        discard(sys.stdout)
+        return EXIT_DONE
+    except OSError as error:  # --help into a full disk
+        discard(sys.stdout)
+        say("error", f"cannot write to standard output: {error.strerror or error}")
+        return EXIT_WRITE_FAILED
+    with warnings.catch_warnings(), shown_notes():
         warnings.showwarning = show_warning
         try:
             return COMMANDS[args.command](args)
         except BadInput as error:
             say("error", str(error))
             return EXIT_BAD_INPUT
+        except StdoutFailed as error:
+            say("error", f"cannot write to standard output: {error}")
+            return EXIT_WRITE_FAILED
         except KeyboardInterrupt:  # outside a run (a run writes its outputs first)
             say("interrupted", "stopped by the user")
             return EXIT_INTERRUPTED

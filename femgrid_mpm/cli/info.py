@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .parser import EXIT_DONE
+from .parser import EXIT_DONE, emit
 from .scene_input import build, critical_dt, load, warn_time_step
 
 
@@ -30,11 +30,11 @@ def info(args) -> int:
         "dt": f"{simulation.dt:.6g} s" + (" (auto)" if scene.time.dt == "auto" else ""),
         "critical_dt": "not estimated (not enough memory)" if (critical := critical_dt(simulation)) is None
         else f"{critical:.6g} s (estimated)",
-        "steps": f"{simulation.n_steps} to t = {scene.time.end:g} s",
+        "steps": f"{simulation.n_steps} to t = {simulation.end_time:.6g} s" + (
+            "" if abs(simulation.end_time - scene.time.end) <= 1e-9 * scene.time.end else f" (time.end = {scene.time.end:g} s, rounded up to whole steps)"),
         "records": f"every {simulation.every} steps" if simulation.every else "none (no [output])",
     }
     width = max(map(len, lines)) + 1
-    for key, value in lines.items():
-        print(f"{key + ':':<{width}} {value}")
+    emit("\n".join(f"{key + ':':<{width}} {value}" for key, value in lines.items()))
     warn_time_step(simulation)
     return EXIT_DONE

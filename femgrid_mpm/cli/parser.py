@@ -12,12 +12,16 @@ EXIT_WRITE_FAILED = 1
 EXIT_BAD_INPUT = 2
 EXIT_STOPPED = 3
 EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143
+EXIT_HANGUP = 129
 EXIT_CODES = {
     EXIT_DONE: "done",
-    EXIT_WRITE_FAILED: "the outputs could not be written during the run",
+    EXIT_WRITE_FAILED: "the outputs (or standard output) could not be written",
     EXIT_BAD_INPUT: "bad input: a scene file, an argument or an output directory",
     EXIT_STOPPED: "the simulation stopped on a numerical event; the outputs so far are valid",
-    EXIT_INTERRUPTED: "interrupted; the outputs so far are valid",
+    EXIT_INTERRUPTED: "interrupted (SIGINT, Ctrl-C); the outputs so far are valid",
+    EXIT_HANGUP: "interrupted by SIGHUP (the terminal closed); the outputs so far are valid",
+    EXIT_TERMINATED: "interrupted by SIGTERM (kill); the outputs so far are valid",
 }
 
 
@@ -33,7 +37,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The parser of ``femgrid-mpm run | resume | info | reproduce``."""
+    """The parser of ``femgrid-mpm run | resume | info | reproduce | sweep | report``."""
     from ..bases import BASES
 
     parser = _Parser(
@@ -41,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Material point method in 2D on finite-element background grids.",
         epilog="Exit codes: " + "; ".join(f"{code} {meaning}" for code, meaning in EXIT_CODES.items()) + ".",
     )
-    commands = parser.add_subparsers(dest="command", required=True, metavar="{run,resume,info,reproduce}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="{run,resume,info,reproduce,sweep,report}")
 
     def scene_arguments(command):
         command.add_argument("scene", metavar="SCENE.toml", help="the scene file")
@@ -74,6 +78,23 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce = commands.add_parser("reproduce", help="run the paper's cases and write every figure and table")
     reproduce.add_argument("--out", default="results", metavar="DIR", help="output directory (default: results)")
     reproduce.add_argument("--case", action="append", default=[], metavar="NAME", help="only this case (repeatable; default: all)")
+
+    from .sweep import default_workers, workers_count
+
+    sweep = commands.add_parser("sweep", help="run a scene over the product of the values of some keys (a sweep file), "
+                                "on Dask, and write runs.csv and the report")
+    sweep.add_argument("sweep", metavar="SWEEP.toml", help="the sweep file")
+    sweep.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing; a rerun "
+                       "into it computes only the runs missing)")
+    sweep.add_argument("--workers", type=workers_count, default=default_workers(), metavar="N",
+                       help="runs at once on a local Dask cluster (default: the number of cores, here "
+                       f"{default_workers()}; 1 for timing-grade wall times)")
+    sweep.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run on an existing Dask cluster instead "
+                       "(its workers must see DIR and the scene file at the same paths)")
+    sweep.add_argument("--no-progress", action="store_true", help="no progress bar (it is shown only when stderr is a terminal)")
+
+    report = commands.add_parser("report", help="write a sweep's report (report.md, report.html, figures) from its runs.csv")
+    report.add_argument("directory", metavar="DIR", help="the --out directory of femgrid-mpm sweep")
     return parser
 
 
@@ -83,8 +104,11 @@ def output_directory(text: str) -> Path:
     if not text:  # (a name of spaces is a directory's name like any other)
         raise BadInput("--out: is empty (give a directory, e.g. --out results)")
     out = Path(text)
-    if out.exists() and not out.is_dir():
-        raise BadInput(f"--out {out}: exists and is not a directory")
+    try:
+        if out.exists() and not out.is_dir():
+            raise BadInput(f"--out {out}: exists and is not a directory")
+    except OSError as error:  # e.g. a name longer than the file system allows
+        raise BadInput(f"--out {out}: cannot be used: {error.strerror or error}") from None
     return out
 
 
@@ -99,9 +123,41 @@ def positive_steps(text: str) -> int:
     return value
 
 
+class StdoutFailed(Exception):
+    """Standard output could not be written (a full disk, ``> /dev/full``); not a closed pipe."""
+
+
+def discard(stream) -> None:
+    """Send what is still to be written to ``stream`` (stdout or stderr) to /dev/null, so
+    that its flush at exit cannot fail again (Python's advice for a closed pipe)."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, stream.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # no descriptor (a test's capture): nothing is flushed at exit
+        pass
+
+
+def emit(text: str) -> None:
+    """A line on stdout, flushed.  A reader that went away (a closed pipe: ``| head -1``)
+    ends the output quietly; any other failure raises :class:`StdoutFailed`."""
+    try:
+        print(text, flush=True)
+    except BrokenPipeError:
+        discard(sys.stdout)
+    except OSError as error:
+        discard(sys.stdout)
+        raise StdoutFailed(error.strerror or str(error)) from None
+
+
 def say(kind: str, message: str) -> None:
-    """One line on stderr: ``femgrid-mpm: KIND: message``."""
-    print(f"{PROG}: {kind}: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+    """One line on stderr: ``femgrid-mpm: KIND: message`` (nothing if stderr cannot be written)."""
+    try:
+        print(f"{PROG}: {kind}: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+    except OSError:
+        discard(sys.stderr)
 
 
 def show_warning(message, category, filename, lineno, file=None, line=None) -> None:

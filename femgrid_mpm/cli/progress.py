@@ -1,4 +1,5 @@
-"""The progress bar of a run on a terminal: steps, simulated time and the time left."""
+"""The progress bars on a terminal: a run's (steps, simulated time and the time left) and
+``reproduce``'s (its simulations, the last one done)."""
 
 from __future__ import annotations
 
@@ -34,3 +35,20 @@ def progress_bar(simulation, enabled: bool):
         bar.update(step - bar.n)
 
     return bar, progress
+
+
+def runs_bar(total: int, enabled: bool):
+    """A tqdm bar over ``total`` simulations on stderr, and the callback that counts one
+    (its argument, the run's label, shown beside the bar); (None, None) if not enabled."""
+    if not enabled:
+        return None, None
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, unit="run", file=sys.stderr, dynamic_ncols=True,
+               bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} runs{postfix} [{elapsed}<{remaining}]")
+
+    def count(label: str) -> None:
+        bar.set_postfix_str(label, refresh=False)
+        bar.update(1)
+
+    return bar, count

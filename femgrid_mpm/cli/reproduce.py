@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import warnings
 
-from .parser import EXIT_DONE, BadInput, output_directory
+from .parser import EXIT_DONE, BadInput, emit, output_directory
+from .progress import runs_bar
 
 
 def reproduce(args) -> int:
     """Run the paper's cases (:data:`femgrid_mpm.reproduce.CASES`) into ``--out``."""
     from ..output import probe_writable
-    from ..reproduce import CASES
+    from ..reproduce import CASES, PLANNED_RUNS
+    from ..reproduce.timing import following
 
     unknown = [name for name in args.case if name not in CASES]
     if unknown:
@@ -23,12 +26,18 @@ def reproduce(args) -> int:
     except OSError as error:
         raise BadInput(f"--out {out}: cannot write there: {error.strerror or error}") from None
     warnings.simplefilter("ignore")  # expected events (negative masses under "warn") are in the tables
-    for name, run in CASES.items():
-        if args.case and name not in args.case:
-            continue
-        print(f"{name} ...", file=sys.stderr, flush=True)
-        run(out / name)
-        table = out / name / "table.md"
-        if table.exists():
-            print(table.read_text())
+    chosen = [name for name in CASES if not args.case or name in args.case]
+    bar, follow = runs_bar(sum(PLANNED_RUNS[name]() for name in chosen), sys.stderr.isatty())
+    try:
+        with following(follow) if follow else contextlib.nullcontext():
+            for name in chosen:
+                if bar is None:
+                    print(f"{name} ...", file=sys.stderr, flush=True)
+                CASES[name](out / name)
+                table = out / name / "table.md"
+                if table.exists():
+                    (bar.write if bar is not None else emit)(table.read_text())
+    finally:
+        if bar is not None:
+            bar.close()
     return EXIT_DONE

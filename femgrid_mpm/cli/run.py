@@ -7,45 +7,50 @@ far kept valid.
 
 from __future__ import annotations
 
-import contextlib
+import signal
 import sys
 from pathlib import Path
 
-from .parser import (EXIT_DONE, EXIT_INTERRUPTED, EXIT_STOPPED, EXIT_WRITE_FAILED, BadInput, output_directory,
-                     say)
+from .parser import EXIT_DONE, EXIT_STOPPED, EXIT_WRITE_FAILED, BadInput, StdoutFailed, emit, output_directory, say
 from .progress import progress_bar
 from .scene_input import build, load, warn_time_step
+from .signals import Interrupted, RunSignals
 
 
 def run(args) -> int:
     """Run a scene into ``--out``; see :data:`~femgrid_mpm.cli.parser.EXIT_CODES` for the exit codes."""
-    from ..output import RunOutputs
+    from ..output import OutputRefused, RunOutputs
+    from ..reading import read_regular_file
 
     scene, overrides = load(args)
     out = output_directory(args.out)
     outputs = RunOutputs(out, scene, source=args.scene, overrides=overrides, checkpoint_every=args.checkpoint_every)
+    try:
+        outputs.check()
+    except OutputRefused as error:
+        raise BadInput(f"--out {out}: {error}") from None
     simulation = build(scene, args.scene, outputs.observers)
     try:
-        source_bytes = Path(args.scene).read_bytes()
+        source_bytes = read_regular_file(args.scene)
     except OSError as error:
-        raise BadInput(f"{args.scene}: cannot be read: {error.strerror}") from None
+        raise BadInput(f"{args.scene}: cannot be read: {error.strerror or error}") from None
     warn_time_step(simulation)
-    try:
-        outputs.start(simulation, source_bytes)
-    except OSError as error:
-        raise BadInput(f"--out {out}: cannot write there: {error.strerror or error}") from None
-    return execute(simulation, outputs, progress=not args.no_progress)
+    return execute(simulation, outputs, progress=not args.no_progress,
+                   begin=lambda: outputs.start(simulation, source_bytes), place=f"--out {out}")
 
 
 def resume(args) -> int:
     """Continue the run in ``DIR`` from ``DIR/checkpoint.npz`` with the scene ``DIR/scene.toml``."""
     from ..checkpoint import CHECKPOINT_FILE, CheckpointError, read_checkpoint, scene_digest
-    from ..output import SCENE_FILE, RunOutputs
+    from ..output import SCENE_FILE, OutputRefused, RunOutputs
     from ..scene import SceneError, load_scene
 
     directory = Path(args.directory)
-    if not directory.is_dir():
-        raise BadInput(f"{directory}: no such directory")
+    try:
+        if not directory.is_dir():
+            raise BadInput(f"{directory}: no such directory")
+    except OSError as error:  # e.g. a name longer than the file system allows
+        raise BadInput(f"{directory}: cannot be used: {error.strerror or error}") from None
     try:
         arrays, values = read_checkpoint(directory / CHECKPOINT_FILE)
     except CheckpointError as error:
@@ -68,21 +73,22 @@ def resume(args) -> int:
                        f"resume (to run it again: femgrid-mpm run {scene_path} --out DIR)")
     try:
         outputs = RunOutputs.resumed(directory, scene, values["outputs"])
-    except (KeyError, TypeError, ValueError) as error:
+    except (KeyError, TypeError, ValueError, ArithmeticError) as error:
         raise BadInput(f"{directory / CHECKPOINT_FILE}: not a readable checkpoint (outputs: {error!r})") from None
+    try:
+        outputs.check(starting=False)
+    except OutputRefused as error:
+        raise BadInput(str(error)) from None
     simulation = build(scene, scene_path, outputs.observers)
     # before the state is put back, as the interrupted run did before its first step:
     # the critical step is estimated at the start (it is in the summary)
     warn_time_step(simulation)
     try:
         simulation.restore(arrays, values["simulation"])
-    except (KeyError, TypeError, ValueError) as error:
+    except (KeyError, TypeError, ValueError, ArithmeticError) as error:
         raise BadInput(f"{directory / CHECKPOINT_FILE}: does not fit {scene_path} ({type(error).__name__}: {error})") from None
-    try:
-        outputs.resume(simulation)
-    except OSError as error:
-        raise BadInput(f"{directory}: cannot write there: {error.strerror or error}") from None
-    return execute(simulation, outputs, progress=not args.no_progress)
+    return execute(simulation, outputs, progress=not args.no_progress,
+                   begin=lambda: outputs.resume(simulation), place=str(directory))
 
 
 def run_status(directory: Path) -> dict | None:
@@ -90,18 +96,33 @@ def run_status(directory: Path) -> dict | None:
     import json
 
     from ..output import SUMMARY_FILE
+    from ..reading import read_regular_file
 
     try:
-        summary = json.loads((directory / SUMMARY_FILE).read_text())
-    except (OSError, ValueError):
+        summary = json.loads(read_regular_file(directory / SUMMARY_FILE))
+    except (OSError, ValueError, RecursionError):
         return None
     return summary if isinstance(summary, dict) else None
 
 
-def execute(simulation, outputs, progress: bool) -> int:
-    """Run a built simulation into its outputs (started or resumed), writing
-    checkpoints if asked; the exit code (a progress bar on stderr if ``progress``
-    and stderr is a terminal)."""
+def execute(simulation, outputs, progress: bool, begin, place: str) -> int:
+    """Start the outputs (``begin``: :meth:`RunOutputs.start` or ``resume``; a failure is
+    bad input at ``place``), run the simulation into them, writing checkpoints if asked,
+    and finish them; the exit code (a progress bar on stderr if ``progress`` and stderr
+    is a terminal).  SIGINT, SIGTERM and SIGHUP interrupt the run once
+    (:class:`~femgrid_mpm.cli.signals.RunSignals`); the files are then written whole."""
+    with RunSignals() as signals:
+        try:
+            begin()  # calm: a signal meanwhile interrupts the run at its first step
+        except OSError as error:
+            raise BadInput(f"{place}: cannot write there: {error.strerror or error}") from None
+        outcome = run_interruptibly(simulation, outputs, progress, signals)
+        return finish(simulation, outputs, outcome)
+
+
+def run_interruptibly(simulation, outputs, progress: bool, signals: RunSignals):
+    """The run's outcome: its result, the :class:`SimulationStopped`, the :class:`Interrupted`
+    or the OSError that ended it; the signals are calm when it returns."""
     from ..checkpoint import CHECKPOINT_FILE, scene_digest, write_checkpoint
     from ..diagnostics import SimulationStopped
     from ..output import SCENE_FILE
@@ -119,49 +140,56 @@ def execute(simulation, outputs, progress: bool) -> int:
     bar, update = progress_bar(simulation, enabled=progress and sys.stderr.isatty())
     try:
         try:
-            result = simulation.run(progress=update, checkpoint=checkpoint, checkpoint_every=outputs.checkpoint_every)
-        finally:
-            if bar is not None:
-                bar.close()
-        with uninterrupted():
-            outputs.finish(result)
-    except SimulationStopped as stop:
-        try:
-            with uninterrupted():
-                outputs.finish(stop.result, stop)
+            signals.arm()
+            try:
+                outcome = simulation.run(progress=update, checkpoint=checkpoint,
+                                         checkpoint_every=outputs.checkpoint_every)
+            finally:
+                if bar is not None:
+                    bar.close()
+        except SimulationStopped as stop:
+            outcome = stop
         except OSError as error:
-            return write_failed(out, error, f"after {stop}")
-        say("stopped", f"{stop}; the outputs so far are in {out}")
-        return EXIT_STOPPED
-    except KeyboardInterrupt:
-        where = f"at step {simulation.step_index} (t = {simulation.time:.6g} s)"
+            outcome = error
+        signals.calm()
+    except Interrupted as interrupt:  # raised once at most: any later signal is only recorded
+        outcome = interrupt
+    signals.calm()
+    return outcome
+
+
+def finish(simulation, outputs, outcome) -> int:
+    """Write the last outputs of a run that ended with ``outcome``; its line and exit code."""
+    from ..diagnostics import SimulationStopped
+
+    out = outputs.directory
+    if isinstance(outcome, OSError):
+        return write_failed(out, outcome)
+    if isinstance(outcome, SimulationStopped):
         try:
-            with uninterrupted():  # a second Ctrl-C must not leave the summary saying "running"
-                outputs.finish(simulation.result("interrupted", f"interrupted {where}"))
+            outputs.finish(outcome.result, outcome)
+        except OSError as error:
+            return write_failed(out, error, f"after {outcome}")
+        say("stopped", f"{outcome}; the outputs so far are in {out}")
+        return EXIT_STOPPED
+    if isinstance(outcome, Interrupted):
+        where = f"at step {simulation.step_index} (t = {simulation.time:.6g} s)"
+        by = "" if outcome.signum == signal.SIGINT else f" by {outcome.name}"
+        try:
+            outputs.finish(simulation.result("interrupted", f"interrupted {where}{by}"))
         except OSError as error:
             return write_failed(out, error, f"after an interrupt {where}")
-        say("interrupted", f"{where}; the outputs so far are in {out}")
-        return EXIT_INTERRUPTED
+        say("interrupted", f"{where}{by}; the outputs so far are in {out}")
+        return outcome.exit_code
+    try:
+        outputs.finish(outcome)
     except OSError as error:
         return write_failed(out, error)
-    print(f"{result.message}: {simulation.step_index} steps in {simulation.wall_time:.3g} s; outputs in {out}")
+    try:  # the outputs are complete: a stdout that cannot take this line changes nothing
+        emit(f"{outcome.message}: {simulation.step_index} steps in {simulation.wall_time:.3g} s; outputs in {out}")
+    except StdoutFailed as error:
+        say("warning", f"the run completed (outputs in {out}) but standard output cannot be written: {error}")
     return EXIT_DONE
-
-
-@contextlib.contextmanager
-def uninterrupted():
-    """Ctrl-C ignored while the last files are written (in the main thread; elsewhere as is)."""
-    import signal
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
 
 
 def write_failed(out: Path, error: OSError, when: str = "") -> int:

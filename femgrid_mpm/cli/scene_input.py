@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import warnings
 
 from .parser import BadInput
@@ -21,6 +22,8 @@ def overrides(args) -> dict:
             value = tomllib.loads(f"value = {text.strip()}")["value"]
         except tomllib.TOMLDecodeError:
             value = text.strip()  # a bare word: a string (--set grid.basis=q2)
+        except RecursionError:
+            raise BadInput(f"--set {key}: the value is nested too deeply (no scene key is)") from None
         overrides[key] = value
     if args.basis:
         overrides["grid.basis"] = args.basis
@@ -47,6 +50,7 @@ def build(scene, path, observers):
     no node, ``dt = "auto"`` without a stable step or an initial velocity that
     evaluates to NaN are problems of the scene file.
     """
+    from ..scene.limits import check_records
     from ..solver import Simulation
 
     need, available = memory_need(scene), available_memory()
@@ -59,6 +63,10 @@ def build(scene, path, observers):
         raise BadInput(f"{path}: the scene does not fit in this machine's memory") from None
     except ValueError as error:  # including an initial velocity that is NaN or infinite (it names its key)
         raise BadInput(f"{path}: {key_of_build_error(scene, str(error))}{error}") from None
+    try:  # a run goes to its end: its records must fit
+        check_records(scene, simulation.n_steps, simulation.particles.n)
+    except ValueError as error:
+        raise BadInput(f"{path}: {error}") from None
     return simulation
 
 
@@ -103,6 +111,8 @@ def key_of_build_error(scene, message: str) -> str:
     The library's messages name the value (``support where = 'x < -1'
     selects no grid node``); the command line adds the key in the file.
     """
+    if re.match(r"^[a-z_]+(\.[a-z_]+|\[\d+\])*: ", message):  # it names its key already
+        return ""
     if scene.time.dt == "auto" and "auto" in message:
         return "time.dt: "
     for index, support in enumerate(scene.supports):

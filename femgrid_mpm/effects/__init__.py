@@ -4,7 +4,8 @@
 and, in a table of several kinds, its ``kind``.  The scene's tables are built
 from it (:mod:`femgrid_mpm.scene`), and its order is the order in which the
 step runs the effects of one stage: loads, then damping, then contact and
-supports (both constrain the grid velocity; supports have the last word).
+supports (both constrain the grid velocity; supports have the last word), and
+the observers a scene declares (the exact reference).
 Adding an effect: its file here, one line in :data:`REGISTRY`.  See
 :mod:`femgrid_mpm.effects.base` for the protocol and the stages.
 
@@ -13,7 +14,7 @@ Examples
 >>> kinds("loads")
 ('point', 'gravity', 'body_force')
 >>> tables()
-('loads', 'damping', 'contact', 'supports')
+('loads', 'damping', 'contact', 'supports', 'reference')
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from .contact import Contact
 from .damping import MassDamping
 from .gravity import Gravity
 from .point_load import PointLoad
+from .reference import ExactReference
 from .supports import Support
 
 
@@ -61,6 +63,8 @@ REGISTRY = (
     # shared contact is the single-field step itself: it runs no code of its own
     Entry(Contact, "contact", acts=lambda contact: contact.fields_per_body),
     Entry(Support, "supports"),
+    # an observer: it runs at records, before the energy bookkeeping (which reads its error)
+    Entry(ExactReference, "reference"),
 )
 
 
@@ -99,6 +103,7 @@ __all__ = [
     "BodyForce",
     "Contact",
     "Entry",
+    "ExactReference",
     "Gravity",
     "MassDamping",
     "PointLoad",

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..step import Action, Stage, StepContext
 
-__all__ = ["Action", "Effect", "Stage", "StepContext"]
+__all__ = ["Action", "Effect", "Recorder", "Stage", "StepContext"]
 
 
 class Effect(abc.ABC):
@@ -48,3 +48,33 @@ class Effect(abc.ABC):
         """(n_nodes, 2) bool: the degrees of freedom held at zero for the whole run, or
         None if this effect holds none."""
         return None
+
+
+class Recorder(abc.ABC):
+    """An observer's action that keeps a record of the run (e.g. the error against an
+    exact solution): the simulation puts it into the summary, offers its columns to
+    the energy record and carries it through a checkpoint.
+
+    An effect's :meth:`Effect.bind` may return one; the step calls it like any action.
+    """
+
+    @abc.abstractmethod
+    def __call__(self, ctx: StepContext) -> None:
+        """Take one record."""
+
+    def columns(self) -> dict:
+        """Columns it adds to each energy record: name -> the value of the record just taken
+        (it runs before the energy bookkeeping, which is an observer of the simulation's own)."""
+        return {}
+
+    @abc.abstractmethod
+    def summary(self) -> dict:
+        """Entries of the run's summary."""
+
+    @abc.abstractmethod
+    def state(self) -> np.ndarray:
+        """The record so far, one row per record, for a checkpoint."""
+
+    @abc.abstractmethod
+    def restore(self, rows: np.ndarray) -> None:
+        """Take back :meth:`state`; ValueError if it does not fit."""

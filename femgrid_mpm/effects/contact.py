@@ -80,7 +80,8 @@ class Contact(Effect):
         half_spacing = np.array([0.5 * np.sqrt(np.mean(particles.volume[members])) for members in slices])
         tolerance = self.gap * simulation.grid.spacing
         mu = float(self.friction)
-        tiny = 1e-12 * simulation.reference_mass
+        # a body is present at a node with more than 1e-12 of a full cell of its own material
+        tiny = 1e-12 * simulation.cell_masses.per_body[:, None]
 
         def resolve(ctx: StepContext) -> None:
             if ctx.target is ctx.velocity:

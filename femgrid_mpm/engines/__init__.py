@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+from ..kernels.compiled import note_compilation
 from .engine import Engine
 from .numba_engine import CompiledTransfer
 from .scipy_engine import PerBodyTransfer, ScipyTransfer
@@ -20,7 +21,9 @@ __all__ = ["ENGINES", "CompiledTransfer", "Engine", "PerBodyTransfer", "ScipyTra
 
 def engine_for(simulation) -> Engine:
     """The engine of a simulation: the scene's, or the per-body one for a mass model with
-    one field per body (which only the scipy algebra implements)."""
+    one field per body (which only the scipy algebra implements).  The first in a process
+    whose kernel cache is cold says that they are being compiled (:func:`note_compilation`)."""
+    note_compilation()
     if simulation.mass.assembly.per_body:
         return PerBodyTransfer(simulation)
     return ENGINES[simulation.scene.solver.engine](simulation)

@@ -52,3 +52,8 @@ class Engine(abc.ABC):
     @abc.abstractmethod
     def to_points(self, ctx: StepContext, dt: float) -> float:
         """G2P; returns the finiteness checksum."""
+
+    def kick(self, ctx: StepContext, dt: float, acceleration: np.ndarray) -> None:
+        """The points' velocity alone, ``v += dt N @ a`` (``W`` with HRZ mass), the points
+        staying where they are: the centred scheme's starting half step."""
+        ctx.particles.v += dt * (ctx.transfer_weights @ acceleration)

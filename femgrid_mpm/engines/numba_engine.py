@@ -10,6 +10,8 @@ compute point by point.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numba
 import numpy as np
 import scipy.sparse as sp
@@ -82,6 +84,7 @@ class CompiledTransfer(Engine):
             volume=self.grid_volume if self.want_volume else None,
             pattern=self.pattern,
         )
+        self._cells = simulation.cell_masses
         # threads: chunked variants of the tensor and folded kernels (lumped P2G, linear elastic stress,
         # G2P), whose serial kernel the basis' form picks (None: tensor)
         threads = simulation.scene.solver.threads
@@ -127,7 +130,10 @@ class CompiledTransfer(Engine):
         if outside >= 0:
             self.grid.locate(p.x)  # raises the ValueError naming the points outside
             raise AssertionError(f"point {outside} is outside the grid")  # pragma: no cover
-        mass.assemble_sums(self._sums)
+        sums = self._sums
+        if self._cells.uniform is None:  # bodies of different densities: a full cell's mass at each node
+            sums = dataclasses.replace(sums, scale=self._cells.at_nodes(ctx.N))
+        mass.assemble_sums(sums)
         return momentum
 
     def internal_force(self, ctx: StepContext, dt: float, materials, body_slices) -> np.ndarray:

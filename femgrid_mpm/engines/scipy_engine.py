@@ -125,6 +125,9 @@ class PerBodyTransfer(ScipyTransfer):
         weighted_stress = p.volume[:, None] * p.stress
         return -(self._per_body(ctx.dNdx, weighted_stress[:, [0, 2]]) + self._per_body(ctx.dNdy, weighted_stress[:, [2, 1]]))
 
+    def kick(self, ctx: StepContext, dt: float, acceleration: np.ndarray) -> None:
+        ctx.particles.v += dt * self._gather(ctx.N, acceleration)
+
     def to_points(self, ctx: StepContext, dt: float) -> float:
         p = ctx.particles
         relative_velocity = ctx.velocity - ctx.frame_velocity

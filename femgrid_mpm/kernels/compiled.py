@@ -23,12 +23,17 @@ its own); the files of numba's own in-tree cache are removed from the
 package's ``__pycache__`` directories.  Where no directory is writable,
 kernels are compiled in every process, with one warning: loading from a cache
 that cannot be keyed would bring back the stale kernels.
+
+A first use compiles for about a minute: :func:`note_compilation` says so
+once, on the ``femgrid_mpm`` logger (INFO, which the command line shows as one
+line), when the tree's cache holds no kernel yet.
 """
 
 from __future__ import annotations
 
 import functools
 import hashlib
+import logging
 import os
 import shutil
 import sys
@@ -72,6 +77,26 @@ def cache_key(root: Path) -> str:
     if root == LIBRARY:
         return own
     return hashlib.sha256(f"{own} {fingerprint(LIBRARY)}".encode()).hexdigest()[:16]
+
+
+def cache_is_cold(directory: Path | None) -> bool:
+    """No kernel is cached in ``directory`` (a :func:`cache_directory`; None: nothing is
+    ever cached), so the first run compiles them."""
+    return directory is None or not any(directory.rglob("*.nbi"))
+
+
+@functools.lru_cache(maxsize=None)
+def note_compilation() -> bool:
+    """Once per process: log that the kernels are about to be compiled if this tree's
+    cache is cold (:func:`cache_is_cold`); returns whether it did."""
+    directory = cache_directory(LIBRARY)
+    if not cache_is_cold(directory):
+        return False
+    where = (f"they are cached in {directory} and load in about a second from then on" if directory is not None
+             else "no cache directory is writable, so every process compiles them")
+    logging.getLogger("femgrid_mpm").info(
+        "compiling the numba kernels, about a minute on first use (only once: %s)", where)
+    return True
 
 
 def _writable(directory: Path) -> bool:

@@ -17,6 +17,7 @@ declares in ``assembly`` (:class:`~.protocol.Assembly`).
 ``preconditioners.py`` the splines' tensor Gram preconditioner and its boundary layer
 ``sparse.py``          compiled products of the matrix with nodal vectors
 ``exclusion.py``       weak-node lumping and exclusion, in place on the fixed pattern
+``scale.py``           :class:`CellMasses`: a full cell of the material at each node, the scale of "empty"
 =====================  ==========================================================
 """
 
@@ -29,14 +30,15 @@ from .diagonal import HrzMass, LumpedMass, positive_weights
 from .per_body import FieldLumpedMass
 from .preconditioners import tensor_preconditioner
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
+from .scale import CellMasses
 
 __all__ = [
-    "Assembly", "ConsistentMass", "DIRECT_LIMIT", "FieldLumpedMass", "HrzMass", "Inertia", "LumpedMass", "MassModel",
+    "Assembly", "CellMasses", "ConsistentMass", "DIRECT_LIMIT", "FieldLumpedMass", "HrzMass", "Inertia", "LumpedMass", "MassModel",
     "NodalSums", "SingularMassError", "build_mass_model", "positive_weights", "tensor_preconditioner",
 ]
 
 
-def build_mass_model(solver, grid, reference_mass: float, body_slices: list, per_body: bool = False,
+def build_mass_model(solver, grid, cells: CellMasses, per_body: bool = False,
                      fixed: np.ndarray | None = None, time_step: float | None = None) -> MassModel:
     """The mass model a scene's ``[solver]`` table asks for, complete.
 
@@ -44,10 +46,8 @@ def build_mass_model(solver, grid, reference_mass: float, body_slices: list, per
     ----------
     solver : femgrid_mpm.scene.SolverSpec
     grid : femgrid_mpm.Grid
-    reference_mass : float
-        Mass of one full lattice cell (kg), the scale for "empty".
-    body_slices : list of slice
-        Each body's points.
+    cells : CellMasses
+        A full lattice cell's mass of each body (kg) and its points: the scale for "empty".
     per_body : bool
         One lumped field per body (frictional contact).
     fixed : ndarray of bool, shape (n_nodes, 2), optional
@@ -56,17 +56,17 @@ def build_mass_model(solver, grid, reference_mass: float, body_slices: list, per
         The run's step (s), for CG's first guess (None: an estimate's model).
     """
     if per_body:
-        return FieldLumpedMass(grid.n_nodes, reference_mass, body_slices)
+        return FieldLumpedMass(grid.n_nodes, cells)
     if solver.mass == "hrz":
-        return HrzMass(grid.n_nodes, reference_mass)
+        return HrzMass(grid.n_nodes, cells)
     if solver.mass == "lumped":
         if solver.negative_mass == "threshold":
-            return LumpedMass(grid.n_nodes, reference_mass, threshold=solver.mass_threshold,
+            return LumpedMass(grid.n_nodes, cells, threshold=solver.mass_threshold,
                               node_integrals=grid.node_integrals)
-        return LumpedMass(grid.n_nodes, reference_mass)
+        return LumpedMass(grid.n_nodes, cells)
     return ConsistentMass(
         grid.n_nodes,
-        reference_mass,
+        cells,
         node_integrals=grid.node_integrals,
         nonnegative=grid.nonnegative,
         weak_fraction=solver.weak_fraction,

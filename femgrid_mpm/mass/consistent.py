@@ -45,6 +45,7 @@ from .direct import PIVOT_RATIO, _direct_solve, _pivots, _rows_and_block, _small
 from .exclusion import _exclude_in_place, _lump_couplings, _lump_couplings_in_place, _unexcluded_product
 from .preconditioners import TensorPreconditioner, _near_empty_nodes
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
+from .scale import CellMasses
 from .sparse import _CompiledCSR
 from .system import _System
 
@@ -59,8 +60,9 @@ class ConsistentMass(MassModel):
     Parameters
     ----------
     n_nodes : int
-    reference_mass : float
-        Mass of one full lattice cell (kg), the scale for "empty".
+    cells : CellMasses
+        A full lattice cell's mass of each body (kg), the scale for "empty"
+        (:meth:`CellMasses.at_nodes`).
     node_integrals : ndarray, shape (n_nodes,)
         ``integral(phi_i)`` over the grid (m^2), for the weak-node test.
     nonnegative : bool
@@ -91,7 +93,7 @@ class ConsistentMass(MassModel):
     """
 
     n_nodes: int
-    reference_mass: float
+    cells: CellMasses
     node_integrals: np.ndarray = field(repr=False)
     nonnegative: bool = True
     weak_fraction: float = 0.01
@@ -138,6 +140,7 @@ class ConsistentMass(MassModel):
         weighted = N.multiply(m_p[:, None]).tocsr()
         matrix = (N.T @ weighted).tocsr()
         self.lumped = N.T @ m_p
+        self.scale = self.cells.at_nodes(N)
         self._prepare(matrix, None if volume_p is None else N.T @ volume_p)
 
     def assemble_sums(self, sums: NodalSums) -> None:
@@ -147,13 +150,14 @@ class ConsistentMass(MassModel):
         weak-node lumping and the systems keep that structure (no SpGEMM)."""
         pattern, lumped, node_volume = sums.pattern, sums.mass, sums.volume
         self.lumped = lumped
+        self.scale = self.cells.uniform if sums.scale is None else sums.scale
         matrix = _CompiledCSR(pattern.matrix())
         matrix.upper_start = pattern.diagonal  # symmetric bit for bit, in stencil order
         self._prepare(matrix, node_volume, pattern.diagonal)
 
     def _prepare(self, matrix: sp.csr_matrix, node_volume: np.ndarray | None, diagonal_index=None) -> None:
         diagonal = matrix.diagonal() if diagonal_index is None else matrix.data[diagonal_index]
-        self.active = diagonal > 1e-24 * self.reference_mass
+        self.active = diagonal > 1e-24 * self.scale
         self._weak = np.zeros(self.n_nodes, dtype=bool)
         if self.nonnegative and node_volume is not None:
             fraction = np.divide(node_volume, self.node_integrals, out=np.ones(self.n_nodes), where=self.active)
@@ -372,8 +376,9 @@ class ConsistentMass(MassModel):
 
     def _initial_guess(self, rhs: np.ndarray, kind: str, system: "_System") -> np.ndarray:
         """CG's first guess from this model's history (:func:`.cg.initial_guess`)."""
-        return initial_guess(self._previous, self._frame, kind, rhs, self.lumped, 1e-12 * self.reference_mass,
-                             system, self.time_step)
+        # one cut-off for the lumped guess: the lightest body's (only where no history exists)
+        tiny = 1e-12 * (self.scale if np.ndim(self.scale) == 0 else self.cells.smallest)
+        return initial_guess(self._previous, self._frame, kind, rhs, self.lumped, tiny, system, self.time_step)
 
     def _blend_target(self) -> np.ndarray:
         """Positive diagonal to blend with: the lumped masses, or where row sums

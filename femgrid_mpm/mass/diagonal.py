@@ -16,6 +16,7 @@ import scipy.sparse as sp
 
 from ..kernels.compiled import compiled
 from .protocol import Assembly, Inertia, MassModel, NodalSums
+from .scale import CellMasses
 
 
 @dataclass
@@ -25,9 +26,9 @@ class LumpedMass(MassModel):
     Parameters
     ----------
     n_nodes : int
-    reference_mass : float
-        Mass of one full lattice cell (kg); masses with ``|m_i|`` below
-        ``1e-12 * reference_mass`` count as empty.
+    cells : CellMasses
+        A full lattice cell's mass of each body (kg); masses with ``|m_i|`` below
+        ``1e-12`` of the node's (:meth:`CellMasses.at_nodes`) count as empty.
     threshold : float, optional
         The ``negative_mass = "threshold"`` remedy: at a node whose volume
         fraction ``(N.T @ V_p)_i / integral(phi_i)`` is below this (every
@@ -40,7 +41,7 @@ class LumpedMass(MassModel):
     """
 
     n_nodes: int
-    reference_mass: float
+    cells: CellMasses
     threshold: float | None = None
     node_integrals: np.ndarray | None = field(default=None, repr=False)
     kind = "lumped"
@@ -51,6 +52,8 @@ class LumpedMass(MassModel):
     nodes_below_threshold: int = field(default=0, init=False)
     #: the smallest of ``lumped`` when the compiled sums were assembled, else None
     smallest: float | None = field(default=None, init=False, repr=False)
+    #: a full cell's mass at the nodes at the last assembly: one float, or one per node
+    scale: float | np.ndarray = field(default=0.0, init=False, repr=False)
     #: ``1 / m_i`` on the active nodes (zero elsewhere), reused from step to step
     _inverse: np.ndarray | None = field(default=None, init=False, repr=False)
 
@@ -71,22 +74,24 @@ class LumpedMass(MassModel):
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
         self.lumped = N.T @ m_p
         self.smallest = None
+        self.scale = self.cells.at_nodes(N)
         absolute = _absolute_mass(N, m_p, self.lumped)
-        self.active = (np.abs(self.lumped) > 1e-6 * absolute) & (absolute > 1e-12 * self.reference_mass)
+        self.active = (np.abs(self.lumped) > 1e-6 * absolute) & (absolute > 1e-12 * self.scale)
         self._inverse = np.divide(1.0, self.lumped, out=np.zeros(self.n_nodes), where=self.active)
         self._replace(absolute, None if volume_p is None or self.threshold is None else N.T @ volume_p)
 
     def assemble_sums(self, sums: NodalSums) -> None:
         """The same from sums the compiled P2G made: ``N.T @ m_p``, (signed
-        bases) ``|N|.T @ m_p`` and (threshold) ``N.T @ V_p``.  The arrays are
-        kept, not copied."""
+        bases) ``|N|.T @ m_p``, (threshold) ``N.T @ V_p`` and (bodies of
+        different densities) the scale at the nodes.  The arrays are kept, not copied."""
         lumped, absolute, volume = sums.mass, sums.absolute, sums.volume
         if self._inverse is None or len(self._inverse) != len(lumped):
             self._inverse = np.zeros(len(lumped))
             self.active = np.zeros(len(lumped), dtype=bool)
         self.lumped = lumped
         absolute = lumped if absolute is None else absolute
-        self.smallest = _lumped_inverse(lumped, absolute, self.reference_mass, self._inverse, self.active)
+        self.scale = self.cells.uniform if sums.scale is None else sums.scale
+        self.smallest = _lumped_inverse(lumped, absolute, *_scale_arguments(self.scale), self._inverse, self.active)
         self._replace(absolute, volume)
 
     def _replace(self, absolute: np.ndarray, volume: np.ndarray | None) -> None:
@@ -110,7 +115,7 @@ class LumpedMass(MassModel):
             return
         if volume is None:
             raise ValueError("the mass threshold needs the nodal volumes N.T @ V_p")
-        below = (absolute > 1e-12 * self.reference_mass) & (volume < self.threshold * self.node_integrals)
+        below = (absolute > 1e-12 * self.scale) & (volume < self.threshold * self.node_integrals)
         self.nodes_below_threshold = int(np.count_nonzero(below))
         if self.nodes_below_threshold:
             self._inverse[below] = 1.0 / absolute[below]
@@ -127,8 +132,8 @@ class LumpedMass(MassModel):
     def inertia(self, N: sp.csr_matrix) -> Inertia:
         return Inertia(inverses=self.inverses(), transfer=N)
 
-    def row_sums(self) -> list[tuple[np.ndarray, float | None]]:
-        return [(self.lumped, self.smallest)]
+    def row_sums(self) -> list[tuple[np.ndarray, float | None, float | np.ndarray]]:
+        return [(self.lumped, self.smallest, self.scale)]
 
     def grid_velocity(self, relative_momentum: np.ndarray, frame_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 17 in the frame moving with ``frame_velocity``: ``(p, v)``, the momentum
@@ -188,7 +193,7 @@ class HrzMass(MassModel):
     """
 
     n_nodes: int
-    reference_mass: float
+    cells: CellMasses
     kind = "hrz"
     assembly = Assembly(hrz_weights=True)
     #: W as a matrix: set by :meth:`assemble`; after :meth:`assemble_hrz` built
@@ -198,12 +203,14 @@ class HrzMass(MassModel):
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
         self.weights = positive_weights(N)
+        self.scale = self.cells.at_nodes(N)
         self.assemble_hrz(N.T @ m_p, self.weights.T @ m_p)
 
     def assemble_sums(self, sums: NodalSums) -> None:
         """The same from the sums the compiled P2G made: the row sums ``N.T @ m_p``
         and the diagonal ``W.T @ m_p`` (kept, not copied); ``weights`` then waits
         for :meth:`weights_for`."""
+        self.scale = self.cells.uniform if sums.scale is None else sums.scale
         self.assemble_hrz(sums.mass, sums.hrz)
 
     def assemble_hrz(self, lumped: np.ndarray, diagonal: np.ndarray) -> None:
@@ -257,17 +264,18 @@ class HrzMass(MassModel):
         return vector * self.diagonal[:, None]
 
 
-def _active(N: sp.csr_matrix, m_p: np.ndarray, lumped: np.ndarray, reference_mass: float) -> np.ndarray:
+def _active(N: sp.csr_matrix, m_p: np.ndarray, lumped: np.ndarray, scale: float | np.ndarray) -> np.ndarray:
     """Nodes whose lumped mass can be divided by.
 
     Empty nodes are not.  With negative shape functions (q2, serendipity) a
     node's mass can also pass through zero by cancellation while points
     still touch it; there ``p_i / m_i`` is round-off over round-off, so a
     node whose mass is below 1e-6 of its absolute mass ``sum m_p |N_ip|``
-    is not active either (its solution is zero, as for empty nodes).
+    is not active either (its solution is zero, as for empty nodes).  ``scale``: a full
+    cell's mass (kg), one or per node.
     """
     absolute = _absolute_mass(N, m_p, lumped)
-    return (np.abs(lumped) > 1e-6 * absolute) & (absolute > 1e-12 * reference_mass)
+    return (np.abs(lumped) > 1e-6 * absolute) & (absolute > 1e-12 * scale)
 
 
 def _absolute_mass(N: sp.csr_matrix, m_p: np.ndarray, lumped: np.ndarray) -> np.ndarray:
@@ -278,13 +286,27 @@ def _absolute_mass(N: sp.csr_matrix, m_p: np.ndarray, lumped: np.ndarray) -> np.
     return sp.csr_matrix((np.abs(N.data), N.indices, N.indptr), shape=N.shape).T @ m_p
 
 
+def _scale_arguments(scale: float | np.ndarray) -> tuple[float, np.ndarray]:
+    """``(uniform, per_node)`` for :func:`_lumped_inverse`: one of them in use, the
+    other 0 or empty (one compiled signature for both)."""
+    if np.ndim(scale) == 0:
+        return float(scale), _NO_SCALES
+    return 0.0, scale
+
+
+_NO_SCALES = np.zeros(0)
+
+
 @compiled()
-def _lumped_inverse(lumped, absolute, reference_mass, inverse, active):
+def _lumped_inverse(lumped, absolute, uniform, per_node, inverse, active):
     """:func:`_active` and ``1 / m_i`` on the active nodes, from the sums; returns the
-    smallest ``m_i`` (for the negative-mass check, which would otherwise pass over them again)."""
+    smallest ``m_i`` (for the negative-mass check, which would otherwise pass over them again).
+    A full cell's mass is ``per_node[i]``, or ``uniform`` if ``per_node`` is empty."""
     smallest = np.inf
+    per_node_scales = per_node.shape[0] > 0
     for i in range(len(lumped)):
-        active[i] = abs(lumped[i]) > 1e-6 * absolute[i] and absolute[i] > 1e-12 * reference_mass
+        scale = per_node[i] if per_node_scales else uniform
+        active[i] = abs(lumped[i]) > 1e-6 * absolute[i] and absolute[i] > 1e-12 * scale
         inverse[i] = 1.0 / lumped[i] if active[i] else 0.0
         smallest = min(smallest, lumped[i])
     return smallest

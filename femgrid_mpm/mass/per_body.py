@@ -18,6 +18,7 @@ import scipy.sparse as sp
 
 from .diagonal import _active
 from .protocol import Assembly, Inertia, MassModel, NodalSums
+from .scale import CellMasses
 
 
 @dataclass
@@ -25,23 +26,25 @@ class FieldLumpedMass(MassModel):
     """Lumped masses per body, shape (n_bodies, n_nodes); solves are divisions.
 
     ``lumped`` is the total over bodies (what a single field would have), for
-    the energy bookkeeping and diagnostics; ``field_lumped`` is per body.
+    the energy bookkeeping and diagnostics; ``field_lumped`` is per body.  Each
+    field is empty or negative relative to its own body's full cell.
     """
 
     n_nodes: int
-    reference_mass: float
-    body_slices: list
+    cells: CellMasses
     kind = "lumped"
     divides_by_row_sums = True
     assembly = Assembly(per_body=True)
     field_lumped: np.ndarray = field(init=False, repr=False)
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
-        self.field_lumped = np.stack([N[members].T @ m_p[members] for members in self.body_slices])
+        slices = self.cells.body_slices
+        self.field_lumped = np.stack([N[members].T @ m_p[members] for members in slices])
         self.field_active = np.stack([
-            _active(N[members], m_p[members], lumped, self.reference_mass)
-            for members, lumped in zip(self.body_slices, self.field_lumped)
+            _active(N[members], m_p[members], lumped, cell)
+            for members, lumped, cell in zip(slices, self.field_lumped, self.cells.per_body)
         ])
+        self.scale = self.cells.at_nodes(N)
         self._inverse = np.divide(1.0, self.field_lumped, out=np.zeros_like(self.field_lumped), where=self.field_active)
         self.lumped = self.field_lumped.sum(axis=0)
         self.active = self.field_active.any(axis=0)
@@ -62,8 +65,14 @@ class FieldLumpedMass(MassModel):
         return vector * self.field_lumped[:, :, None]
 
     def row_sums(self) -> list[tuple[np.ndarray, float | None]]:
-        """Each field divides by its own."""
-        return [(lumped, None) for lumped in self.field_lumped]
+        """Each field divides by its own, measured against its own body's full cell."""
+        return [(lumped, None, float(cell)) for lumped, cell in zip(self.field_lumped, self.cells.per_body)]
+
+    def field_inertias(self, N: sp.csr_matrix) -> list[tuple[slice, np.ndarray, Inertia]]:
+        """Each body's own field: its points move with its own masses only (a light body
+        beside a heavy one has its own, shorter, critical step)."""
+        return [(members, active, Inertia(inverses=(inverse, inverse), transfer=N[members]))
+                for members, active, inverse in zip(self.cells.body_slices, self.field_active, self._inverse)]
 
     def inertia(self, N: sp.csr_matrix) -> Inertia:
         """The shared field's: the bodies' total mass, where any body has some."""

@@ -65,7 +65,9 @@ class NodalSums:
     ``absolute`` is ``|N|.T @ m_p`` on signed bases (None on non-negative ones,
     where it is ``mass``); ``hrz`` the HRZ diagonal ``W.T @ m_p``, ``volume``
     ``N.T @ V_p`` and ``pattern`` the assembled matrix when the model's
-    :class:`Assembly` asks for them (else None).
+    :class:`Assembly` asks for them (else None); ``scale`` a full cell's mass at
+    each node when the bodies' differ (:meth:`femgrid_mpm.mass.CellMasses.at_nodes`;
+    None: the one of all bodies).
     """
 
     mass: np.ndarray
@@ -73,6 +75,7 @@ class NodalSums:
     hrz: np.ndarray | None = None
     volume: np.ndarray | None = None
     pattern: object | None = None
+    scale: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -106,6 +109,11 @@ class MassModel(abc.ABC):
         Nodes whose solution is computed (zero elsewhere).
     nodes_below_threshold : int
         Nodes the mass threshold changed at the last assembly.
+    scale : float or ndarray
+        A full lattice cell's mass of the material at the nodes at the last
+        assembly (kg), one for all or one per node
+        (:meth:`femgrid_mpm.mass.CellMasses.at_nodes`): what "empty" and
+        "negative" are measured against.
     """
 
     kind: str
@@ -114,6 +122,7 @@ class MassModel(abc.ABC):
     lumped: np.ndarray
     active: np.ndarray
     nodes_below_threshold: int = 0
+    scale: float | np.ndarray = 0.0
 
     @abc.abstractmethod
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
@@ -141,6 +150,11 @@ class MassModel(abc.ABC):
     def inertia(self, N: sp.csr_matrix) -> Inertia:
         """The iteration's mass after :meth:`assemble` with these ``N``."""
 
+    def field_inertias(self, N: sp.csr_matrix) -> list[tuple[slice, np.ndarray, Inertia]]:
+        """The iteration's mass field by field: ``(points, active nodes, inertia)`` of
+        each, the points' rows of ``N`` carrying it.  One field by default."""
+        return [(slice(None), self.active, self.inertia(N))]
+
     def transfer_weights(self, N: sp.csr_matrix) -> sp.csr_matrix:
         """What carries mass, momentum and point forces between points and grid: ``N``
         (models with weights of their own replace it)."""
@@ -149,10 +163,10 @@ class MassModel(abc.ABC):
     def points_moved(self) -> None:
         """The points moved: anything derived from their places is stale."""
 
-    def row_sums(self) -> list[tuple[np.ndarray, float | None]]:
+    def row_sums(self) -> list[tuple[np.ndarray, float | None, float | np.ndarray]]:
         """The row sums the negative-mass monitor checks, one array per field, each
-        with its minimum if already known (else None)."""
-        return [(self.lumped, None)]
+        with its minimum if already known (else None) and its field's :attr:`scale`."""
+        return [(self.lumped, None, self.scale)]
 
     def nodal_masses(self) -> np.ndarray:
         """The diagonal masses that weigh grid speeds (the rest test)."""

@@ -7,7 +7,7 @@ The particle series for ParaView is written by :class:`femgrid_mpm.output.Partic
 an observer of the output.
 """
 
-from .energy import COLUMNS, EnergyBookkeeping, kinetic_energy
+from .energy import COLUMNS, EnergyBookkeeping, energy_drift, kinetic_energy
 from .probe import Probe
 
-__all__ = ["COLUMNS", "EnergyBookkeeping", "Probe", "kinetic_energy"]
+__all__ = ["COLUMNS", "EnergyBookkeeping", "Probe", "energy_drift", "kinetic_energy"]

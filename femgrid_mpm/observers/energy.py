@@ -14,6 +14,8 @@ At every record step, with the grid velocities of time t known:
 
 ``d`` is the change since the first record, so ``total_error = -E_int -
 E_alg`` as in the paper; W enters only when a scene declares forces.
+Observers that keep a record of their own may add columns (:attr:`extra`:
+the exact reference adds ``reference_error``).
 """
 
 from __future__ import annotations
@@ -39,6 +41,17 @@ COLUMNS = (
 )
 
 
+def energy_drift(rows: list[dict]) -> float | None:
+    """The energy balance at the last record relative to the run's energy: its
+    ``total_error`` over the largest ``kinetic + strain + |external_work|`` of the records
+    (the energy the run has held or exchanged at most); None without records, 0 when
+    that scale is 0 (nothing moved, nothing worked)."""
+    if not rows:
+        return None
+    scale = max(row["kinetic"] + row["strain"] + abs(row["external_work"]) for row in rows)
+    return float(rows[-1]["total_error"] / scale) if scale > 0 else 0.0
+
+
 def kinetic_energy(mass: np.ndarray, velocity: np.ndarray) -> float:
     """Eq. 26: ``1/2 sum m v.v`` (J per unit thickness)."""
     return 0.5 * float(np.einsum("p,pi,pi->", mass, velocity, velocity))
@@ -57,6 +70,8 @@ class EnergyBookkeeping(Effect):
     sink: Callable[[dict], None] | None = None
     rows: list[dict] = field(default_factory=list)
     initial: dict[str, float] = field(default_factory=dict)
+    #: further columns: name -> the value at the record just taken (read after the other observers ran)
+    extra: dict[str, Callable[[], float]] = field(default_factory=dict)
 
     name = "energy"
     stage = Stage.OBSERVE
@@ -86,24 +101,31 @@ class EnergyBookkeeping(Effect):
                 "total_error": d_kinetic + d_strain - d_work,
                 "external_work": work,
             }
+            row.update((name, column()) for name, column in self.extra.items())
             self.rows.append(row)
             if self.sink is not None:
                 self.sink(row)
 
         return record_energy
 
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """:data:`COLUMNS`, then the :attr:`extra` ones."""
+        return (*COLUMNS, *self.extra)
+
     def table(self) -> dict[str, np.ndarray]:
         """The records as arrays, one per column."""
-        return {name: np.array([row[name] for row in self.rows]) for name in COLUMNS}
+        return {name: np.array([row[name] for row in self.rows]) for name in self.columns}
 
     def state(self) -> tuple[dict, np.ndarray]:
         """``(initial, rows)``: the first record's values and every row so far,
-        shape (records, len(COLUMNS)), for a checkpoint."""
-        rows = np.array([[row[name] for name in COLUMNS] for row in self.rows], dtype=float).reshape(-1, len(COLUMNS))
+        shape (records, len(columns)), for a checkpoint."""
+        columns = self.columns
+        rows = np.array([[row[name] for name in columns] for row in self.rows], dtype=float).reshape(-1, len(columns))
         return dict(self.initial), rows
 
     def restore(self, initial: dict, rows: np.ndarray) -> None:
         """Take back :meth:`state` (the sink is not called: its owner restores its own)."""
         self.initial.clear()
         self.initial.update({name: float(value) for name, value in initial.items()})
-        self.rows[:] = [{name: float(value) for name, value in zip(COLUMNS, row)} for row in rows]
+        self.rows[:] = [{name: float(value) for name, value in zip(self.columns, row)} for row in rows]

@@ -12,7 +12,8 @@ The outputs of a run in ``DIR`` (the contract documented in the README):
 
 ``energy.csv``
     One row per record, the first at t = 0: :data:`femgrid_mpm.observers.COLUMNS`
-    (``external_work`` only when a force effect is declared).
+    (``external_work`` only when a force effect is declared), then
+    ``reference_error`` when the scene declares ``[reference]``.
 ``final.npz``
     The last state of the points: ``x0, x, v, stress, strain, mass, volume,
     body`` (and ``step``, ``time``).
@@ -52,7 +53,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..step import Stage
-from ..observers import COLUMNS
 from .energy_csv import EnergyCsv
 from .files import (
     CHECKPOINT_FILE,
@@ -85,6 +85,7 @@ __all__ = [
     "SOURCE_SCENE_FILE",
     "SUMMARY_FILE",
     "EnergyCsv",
+    "OutputRefused",
     "ParticleSeries",
     "RunOutputs",
     "Throttle",
@@ -99,6 +100,20 @@ __all__ = [
     "write_final_state",
     "write_summary",
 ]
+
+class OutputRefused(ValueError):
+    """An output directory the run must not write into as it stands; the message is one line."""
+
+
+def _same_file(first: Path, second: Path) -> bool:
+    """Whether two paths name one file (symbolic links resolved, hard links included)."""
+    import os
+
+    try:
+        return os.path.samefile(first, second)
+    except (OSError, ValueError):  # one of them does not exist (or cannot be looked at)
+        return False
+
 
 # RunOutputs lives in the package module itself: it calls the writers by the names
 # they have here (femgrid_mpm.output.write_final_state, probe_writable, ...), the
@@ -144,6 +159,33 @@ class RunOutputs:
         self.observers = declared_observers(scene, self.directory, flush_seconds)
         self.energy: EnergyCsv | None = None
         self.simulation = None
+
+    def paths(self, starting: bool = True) -> list[Path]:
+        """Every path this run writes, replaces or removes in its directory (a resumed
+        run, ``starting = False``, keeps its scene files)."""
+        directory = self.directory
+        names = [ENERGY_FILE, FINAL_FILE, SUMMARY_FILE, SERIES_FILE, CHECKPOINT_FILE]
+        names += [SCENE_FILE, SOURCE_SCENE_FILE] if starting else []
+        paths = [directory / name for name in names]
+        series = directory / SERIES_DIRECTORY
+        if series.is_dir():
+            paths += [path for path in series.iterdir() if SERIES_PATTERN.match(path.name)]
+        return paths
+
+    def check(self, starting: bool = True) -> None:
+        """Raise :class:`OutputRefused` if the run would write over its own scene file, or
+        where a directory stands in the place of a file (or a file in that of ``particles/``);
+        touches no file.  Called before the run, so that nothing is written or removed then."""
+        source = self.source if starting else None
+        for path in self.paths(starting):
+            if source is not None and _same_file(source, path):
+                raise OutputRefused(f"{path}: is the scene file given ({source}): the run would write over it; "
+                                    "give another --out directory")
+            if path.is_dir():
+                raise OutputRefused(f"{path}: is a directory, where the run writes a file")
+        series = self.directory / SERIES_DIRECTORY
+        if self.observers and (series.exists() or series.is_symlink()) and not series.is_dir():
+            raise OutputRefused(f"{series}: is not a directory, where the run writes its particle series")
 
     def start(self, simulation, source_bytes: bytes | None = None) -> None:
         """Create the directory, clear an earlier run's outputs, write the scene and a
@@ -191,7 +233,7 @@ class RunOutputs:
         at once, then fed by the energy bookkeeping."""
         if simulation.energy is not None:
             forced = simulation.effects[Stage.EXTERNAL_FORCE] or simulation.effects[Stage.ADJUST_FORCE]
-            columns = COLUMNS if forced else tuple(c for c in COLUMNS if c != "external_work")
+            columns = tuple(c for c in simulation.energy.columns if forced or c != "external_work")
             self.energy = EnergyCsv(self.directory / ENERGY_FILE, columns, self.flush_seconds)
             self.energy.extend(simulation.energy.rows)
             self.energy.flush()  # the header, so the file exists from the start

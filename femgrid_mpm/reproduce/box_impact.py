@@ -14,7 +14,6 @@ multi-field contact, and writes:
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,10 +21,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..analysis import Probe
-from ..diagnostics import SimulationStopped
 from ..scene import Scene, bundled_scene
-from ..solver import Simulation
 from .plotting import energy_figure, markdown_table
+from .timing import timed_run
 
 BASES = ["q1", "serendipity", "q2", "bspline3", "bspline3_open"]
 PAPER_FIGURE = {"q1": 14, "serendipity": 15, "bspline3": 16}
@@ -80,19 +78,14 @@ def simulate(basis: str, contact: str) -> ImpactRun:
     height = Probe(box_mean(lambda p: p.x[:, 1]), name="box_height")
     speed = Probe(box_mean(lambda p: p.v[:, 1]), name="box_speed")
     middle = Probe(lambda ctx: mid_span_deflection(ctx.particles), name="mid_span")
-    simulation = Simulation(scene, observers=[height, speed, middle])
-    start = time.perf_counter()
-    try:
-        result = simulation.run()
-    except SimulationStopped as stop:
-        result = stop.result
+    _, result, wall = timed_run(scene, observers=[height, speed, middle], label=f"box impact, {basis} {contact}")
     times, heights = height.arrays()
     return ImpactRun(
         basis=basis,
         contact=contact,
         status=result.status,
         message=result.message,
-        wall_time=time.perf_counter() - start,
+        wall_time=wall,
         times=times,
         box_height=heights,
         box_speed=speed.arrays()[1],
@@ -107,6 +100,11 @@ def mid_span_deflection(particles) -> float:
     """Mean vertical displacement (m) of the beam's points within 0.5 m of mid-span."""
     beam = (particles.body == BEAM) & (np.abs(particles.x0[:, 0] - 5.0) <= 0.5)
     return float(np.mean(particles.x[beam, 1] - particles.x0[beam, 1]))
+
+
+def planned_runs(contacts=("shared", "frictional")) -> int:
+    """How many simulations :func:`run` makes."""
+    return len(contacts) * len(BASES)
 
 
 def run(out_dir, contacts=("shared", "frictional")) -> dict:

@@ -21,7 +21,6 @@ comparison uses the force the beam actually receives: under Eq. 35 that is
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,11 +28,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .. import beam_theory
-from ..diagnostics import SimulationStopped
 from ..effects import Stage
 from ..scene import bundled_scene
 from ..solver import Simulation
 from .plotting import markdown_table
+from .timing import timed_run
 
 LENGTH, HEIGHT, E, NU = 8.0, 1.0, 3.0e5, 0.0
 AXIS_Y = 1.5  # the beam spans y = 1 .. 2
@@ -100,12 +99,7 @@ def simulate(scene_name: str, **overrides) -> BeamRun:
         # we take q2's step (same nodes) and let the run show what happens
         as_q2 = Simulation(scene.with_overrides(**{"grid.basis": "q2"}))
         scene = scene.with_overrides(**{"time.dt": as_q2.dt})
-    simulation = Simulation(scene)
-    start = time.perf_counter()
-    try:
-        result = simulation.run()
-    except SimulationStopped as stop:
-        result = stop.result
+    simulation, result, wall = timed_run(scene, label=f"{scene_name}, {scene.grid.basis} {scene.solver.mass}")
     return BeamRun(
         basis=scene.grid.basis,
         mass=scene.solver.mass,
@@ -113,7 +107,7 @@ def simulate(scene_name: str, **overrides) -> BeamRun:
         status=result.status,
         message=result.message,
         force=received_force(simulation),
-        wall_time=time.perf_counter() - start,
+        wall_time=wall,
         steps=result.summary["steps"],
         particles=result.particles,
         end_time=result.summary["time"],
@@ -138,6 +132,12 @@ def clamped_ratio_scale() -> float:
 #: sixth of the lumped one for cubic splines (see README, the critical step)
 PAPER_RESOLUTION = (0.5,)
 ALL_RESOLUTIONS = (0.5, 0.25, 0.125)
+
+
+def planned_runs(resolutions=PAPER_RESOLUTION) -> int:
+    """How many simulations :func:`run` makes: both protocols, the large rotation's three,
+    the resolution study."""
+    return 2 * len(BASES) + len(LARGE_ROTATION) + 2 * len(BASES) * len(resolutions)
 
 
 def run(out_dir, resolutions=PAPER_RESOLUTION) -> dict:
@@ -269,6 +269,11 @@ def _navier_check(runs: dict) -> tuple[list, dict]:
     return rows, report
 
 
+#: the large rotation's runs: basis, material model, marker
+LARGE_ROTATION = (("bspline3", "linear_elastic", "."), ("bspline3_open", "linear_elastic", "."),
+                  ("bspline3_open", "neo_hookean", "x"))
+
+
 def _large_rotation(path: Path) -> tuple[list, dict]:
     """Paper Fig. 12 with the force applied in full: the elastica regime."""
     inertia = beam_theory.second_moment_of_area(HEIGHT)
@@ -279,7 +284,7 @@ def _large_rotation(path: Path) -> tuple[list, dict]:
     x_lin = np.linspace(0, LENGTH, 101)
     ax.plot(x_lin, AXIS_Y - reference_deflection(x_lin, 800.0, "horizontal_element"), "k--", label="linear T&G (a)")
     rows, report = [], {"elastica": elastica._asdict()}
-    for basis, model, marker in (("bspline3", "linear_elastic", "."), ("bspline3_open", "linear_elastic", "."), ("bspline3_open", "neo_hookean", "x")):
+    for basis, model, marker in LARGE_ROTATION:
         run_ = simulate("cantilever_large", **{"grid.basis": basis, "bodies.0.material.model": model})
         x0, u, v = run_.axis()
         ax.plot(x0 + u, AXIS_Y + v, marker, markersize=4, label=f"{basis}, {model}")

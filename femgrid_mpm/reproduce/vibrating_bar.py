@@ -8,17 +8,15 @@ bspline3 with consistent mass, all in plane strain.
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
 
 from ..analysis import bar_axial_period_1d, bar_axial_period_2d, modal_velocity_probe, zero_crossing_period
-from ..diagnostics import SimulationStopped
 from ..scene import bundled_scene
-from ..solver import Simulation
 from .plotting import energy_figure, markdown_table
+from .timing import timed_run
 
 RUNS = [
     ("q1", "lumped"),
@@ -40,13 +38,13 @@ def simulate(basis: str, mass: str, **overrides):
         **{"grid.basis": basis, "solver.mass": mass, "solver.negative_mass": "warn", **overrides}
     )
     probe = modal_velocity_probe(5.0)
-    start = time.perf_counter()
-    try:
-        result = Simulation(scene, observers=[probe]).run()
-    except SimulationStopped as stop:
-        result = stop.result
-    wall = time.perf_counter() - start
+    _, result, wall = timed_run(scene, observers=[probe], label=f"vibrating bar, {basis} {mass}")
     return zero_crossing_period(*probe.arrays()), result, wall
+
+
+def planned_runs() -> int:
+    """How many simulations :func:`run` makes."""
+    return len(RUNS)
 
 
 def run(out_dir) -> dict:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..reading import read_regular_file
 from .messages import _one_line, _shown
 from .models import Scene
 from .validation import SceneError, validated
@@ -35,14 +36,15 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
 
     path = Path(path)
     try:
-        with path.open("rb") as handle:
-            data = tomllib.load(handle)
+        data = tomllib.loads(read_regular_file(path).decode())
     except FileNotFoundError:
         raise SceneError(f"{path}: no such scene file") from None
     except IsADirectoryError:
         raise SceneError(f"{path}: is a directory, not a scene file") from None
     except tomllib.TOMLDecodeError as error:
         raise SceneError(_one_line(f"{path}: not valid TOML: {error}")) from None
+    except RecursionError:
+        raise SceneError(f"{path}: not valid TOML for a scene: nested too deeply for the TOML reader") from None
     except (OSError, UnicodeDecodeError) as error:
         raise SceneError(_one_line(f"{path}: cannot be read: {error}")) from None
     source = str(path)

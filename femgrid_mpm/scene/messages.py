@@ -171,8 +171,11 @@ def _fields(node) -> dict:
     return {name: info.annotation for name, info in fields.items()}
 
 
-def _shown(value) -> str:
-    """A value as it would be written in TOML (``true``, ``"q3"``, ``nan``)."""
+def _shown(value, depth: int = 0) -> str:
+    """A value as it would be written in TOML (``true``, ``"q3"``, ``nan``); numpy arrays as
+    arrays, nesting beyond 8 levels as ``...``."""
+    if depth > 8:
+        return "..."
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
@@ -181,11 +184,13 @@ def _shown(value) -> str:
         return json.dumps(value)
     if isinstance(value, float) and not math.isfinite(value):
         return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+    if hasattr(value, "tolist") and hasattr(value, "dtype"):  # numpy arrays and scalars as Python values
+        return _shown(value.tolist(), depth)
     if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_shown(item) for item in value) + "]"
+        return "[" + ", ".join(_shown(item, depth + 1) for item in value) + "]"
     if isinstance(value, dict):
-        return "{" + ", ".join(f"{key} = {_shown(item)}" for key, item in value.items()) + "}"
-    return repr(value.item() if hasattr(value, "item") else value)  # numpy scalars as Python numbers
+        return "{" + ", ".join(f"{key} = {_shown(item, depth + 1)}" for key, item in value.items()) + "}"
+    return repr(value)
 
 
 def _one_line(text: str) -> str:

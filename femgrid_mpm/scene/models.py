@@ -28,6 +28,7 @@ from pydantic import (
     NonNegativeFloat,
     PositiveFloat,
     PositiveInt,
+    Strict,
     field_validator,
     model_validator,
 )
@@ -38,15 +39,19 @@ from ..effects import PointLoad
 from ..expressions import compile_expression
 from ..grid import MAX_NODES, length_problem, node_count
 from ..particles import count_rectangle
+from .limits import MAX_RECORD_BYTES, MAX_STEPS, step_count
 from .messages import _shown
-from .validation import validated
+from .validation import SceneError, validated
 
 #: Largest number of material points accepted, checked before allocating.
 MAX_POINTS = 100_000_000
-#: a run of more steps is a mistake (dt in the wrong unit): at ~10 us a step, 1e9 take three hours
-MAX_STEPS = 1_000_000_000
 
-Pair = tuple[float, float]
+#: a number in a scene: an integer or a float, never a boolean or a string (pydantic would
+#: take ``true`` as 1 and ``"0.5"`` as 0.5); strict where the scene's own checks read the
+#: value, so that the error names the key that has the wrong type
+Number = Annotated[float, Strict()]
+PositiveNumber = Annotated[float, Strict(), Field(gt=0)]
+Pair = tuple[Number, Number]
 
 
 class _Model(BaseModel):
@@ -60,7 +65,7 @@ class GridSpec(_Model):
     basis: Literal[tuple(BASES)] = "q1"
     lower: Pair
     upper: Pair
-    spacing: PositiveFloat
+    spacing: PositiveNumber
 
     @model_validator(mode="after")
     def _extent(self):
@@ -77,9 +82,11 @@ class TimeSpec(_Model):
     quasi-static (dynamic relaxation) protocol.
     """
 
-    dt: Union[PositiveFloat, Literal["auto"]]
-    end: PositiveFloat
+    dt: Union[PositiveNumber, Literal["auto"]]
+    end: PositiveNumber
     safety: Annotated[float, Field(gt=0, le=1)] = 0.5
+    #: a run of more steps is refused before it starts (a time step in the wrong unit)
+    max_steps: Annotated[int, Field(ge=1, le=2**53)] = MAX_STEPS
     rest_speed: Union[PositiveFloat, None] = None
     rest_after: NonNegativeFloat = 0.0
 
@@ -101,6 +108,11 @@ class SolverSpec(_Model):
     (``"auto"``: SuperLU up to 5000 active nodes, CG beyond);
     ``cg_tolerance`` CG's relative residual; ``engine``
     the implementation of the step's transfers (:mod:`femgrid_mpm.kernels`).
+    ``scheme``: the time integration, ``"paper"`` (section 3.2 as written) or
+    ``"centred"`` (the same step with the points' velocities half a step ahead:
+    second order in dt also when the initial acceleration is not zero; see
+    :meth:`femgrid_mpm.solver.Simulation.advance` and docs/accuracy.md).  Both
+    have the same critical step (:mod:`femgrid_mpm.stability`).
     """
 
     mass: Literal["lumped", "consistent", "hrz"] = "lumped"
@@ -116,6 +128,8 @@ class SolverSpec(_Model):
     engine: Literal["numba", "scipy"] = "numba"
     #: numba engine: threads for the tensor-product and serendipity kernels (1: serial, reproducible bit for bit)
     threads: Annotated[int, Field(ge=1, le=256)] = 1
+    #: the time integration: the paper's order, or the centred difference (half-step velocities)
+    scheme: Literal["paper", "centred"] = "paper"
 
 
 class Material(_Model):
@@ -178,6 +192,8 @@ DampingSpec = effects.table_type("damping")
 ContactSpec = effects.table_type("contact")
 #: ``[[supports]]``
 SupportSpec = effects.table_type("supports")
+#: ``[reference]``: an exact displacement field, and the run's error against it
+ReferenceSpec = effects.table_type("reference")
 
 
 class Output(_Model):
@@ -186,6 +202,8 @@ class Output(_Model):
     every: PositiveInt = 1
     energy: bool = True
     particles: bool = False
+    #: records estimated to take more bytes than this are refused before the run starts
+    max_bytes: Annotated[int, Field(ge=1)] = MAX_RECORD_BYTES
 
 
 class Scene(_Model):
@@ -200,6 +218,7 @@ class Scene(_Model):
     loads: tuple[Load, ...] = ()
     damping: Union[DampingSpec, None] = None
     contact: Union[ContactSpec, None] = None
+    reference: Union[ReferenceSpec, None] = None
     output: Union[Output, None] = None
 
     @model_validator(mode="after")
@@ -207,11 +226,13 @@ class Scene(_Model):
         # Each message starts with the key it is about: these checks span
         # several tables, so pydantic cannot locate them itself.
         names = [body.name for body in self.bodies]
+        first_of: dict[str, int] = {}
         for index, name in enumerate(names):
-            if name in names[:index]:
-                raise ValueError(f"bodies[{index}].name: {name!r} is already the name of bodies[{names.index(name)}]")
+            if name in first_of:
+                raise ValueError(f"bodies[{index}].name: {name!r} is already the name of bodies[{first_of[name]}]")
+            first_of[name] = index
         for index, load in enumerate(self.loads):
-            if isinstance(load, PointLoad) and load.body not in names:
+            if isinstance(load, PointLoad) and load.body not in first_of:
                 raise ValueError(f"loads[{index}].body: there is no body named {load.body!r} (bodies: {', '.join(names)})")
             if isinstance(load, PointLoad) and not all(l <= a <= u for l, a, u in zip(self.grid.lower, load.at, self.grid.upper)):
                 # far away, every point is as near in floating point (at 1e300 the first was taken)
@@ -247,9 +268,11 @@ class Scene(_Model):
                 compile_expression(support.where, ("x", "y"))
             except ValueError as error:
                 raise ValueError(f"supports[{index}].where: {error}") from None
-        if isinstance(self.time.dt, float) and self.time.end / self.time.dt > MAX_STEPS:
-            raise ValueError(f"time.dt: {self.time.dt:g} s to t = {self.time.end:g} s would be "
-                             f"{self.time.end / self.time.dt:.3g} steps, more than the limit of {MAX_STEPS:.0e}")
+        if isinstance(self.time.dt, float):
+            try:
+                step_count(self.time.end, self.time.dt, self.time.max_steps)
+            except ValueError as error:
+                raise ValueError(f"time.dt: {error}") from None
         if self.contact is not None and self.contact.kind == "shared" and (self.contact.friction or self.contact.gap):
             which = "friction" if self.contact.friction else "gap"
             raise ValueError(f"contact.{which}: applies to kind = 'frictional' only (one shared field has no "
@@ -266,6 +289,24 @@ class Scene(_Model):
             if self.contact is not None and self.contact.kind == "frictional":
                 raise ValueError("solver.negative_mass: 'threshold' is implemented for one shared field, not for 'frictional' contact")
         return self
+
+    @classmethod
+    def model_validate(cls, obj, **options) -> "Scene":
+        """The scene of ``obj``, a dict of a scene file's tables, checked as a file is
+        (numpy arrays and scalars taken as lists and numbers).
+
+        Raises
+        ------
+        SceneError
+            One line naming the key (``scene: grid.spacing: must be a number``).
+        """
+        if options:  # pydantic's own options (strict, context, ...): pydantic's own validation
+            return super().model_validate(obj, **options)
+        if isinstance(obj, cls):
+            return obj
+        if not isinstance(obj, dict):
+            raise SceneError(f"scene: must be a dict of the tables of a scene file, got {type(obj).__name__}")
+        return validated(cls, obj, {}, "scene")
 
     def node_count(self) -> float:
         """About how many grid nodes the scene makes (counted, nothing allocated)."""

@@ -21,13 +21,18 @@ def validated(model, data: dict, overrides: dict, source: str):
     with one line starting with ``source``."""
     from pydantic import ValidationError
 
+    data = _plain(data)  # a copy: the caller's data is left as it is
     for dotted, value in overrides.items():
         try:
             _assign(data, dotted, _plain(value))
         except (KeyError, IndexError, TypeError, ValueError):
             raise SceneError(f"{source}: {dotted}: no such key to set") from None
+    deep = _nested_too_deep(data)
+    if deep is not None:
+        raise SceneError(f"{source}: {deep}: nested more than {MAX_DEPTH} levels deep (no scene key is)")
     try:
-        scene = model.model_validate(data)
+        # pydantic's own validation (the model's ``model_validate`` comes back here)
+        scene = model.__pydantic_validator__.validate_python(data)
     except ValidationError as error:
         raise SceneError(_one_line(f"{source}: {describe_validation_error(error, model)}")) from None
     except ValueError as error:  # raised by our own checks outside pydantic's wrapping
@@ -38,15 +43,39 @@ def validated(model, data: dict, overrides: dict, source: str):
     return scene
 
 
-def _plain(value):
-    """numpy scalars (and lists or tuples of them) as the Python numbers TOML would give."""
+#: the deepest nesting of tables and arrays accepted (a scene's deepest key is 4 levels down)
+MAX_DEPTH = 32
+
+
+def _plain(value, depth: int = 0):
+    """A copy of ``value`` with numpy arrays and scalars as the lists and Python numbers
+    TOML would give (nesting beyond :data:`MAX_DEPTH` is kept as it is, to be refused)."""
     import numpy as np
 
-    if isinstance(value, np.generic):
-        return value.item()
+    if depth > MAX_DEPTH:
+        return value
+    if isinstance(value, (np.generic, np.ndarray)):
+        return value.tolist()
     if isinstance(value, (list, tuple)):
-        return [_plain(item) for item in value]
+        return [_plain(item, depth + 1) for item in value]
+    if isinstance(value, dict):
+        return {key: _plain(item, depth + 1) for key, item in value.items()}
     return value
+
+
+def _nested_too_deep(data) -> str | None:
+    """The key of the first value nested more than :data:`MAX_DEPTH` levels deep, or None
+    (iteratively: a deeper structure than Python's recursion limit is found too)."""
+    pending = [(data, "", 0)]
+    while pending:
+        value, location, depth = pending.pop()
+        if isinstance(value, (dict, list, tuple)) and depth >= MAX_DEPTH:
+            return location or "(top)"
+        if isinstance(value, dict):
+            pending += [(item, f"{location}.{key}" if location else str(key), depth + 1) for key, item in value.items()]
+        elif isinstance(value, (list, tuple)):
+            pending += [(item, f"{location}[{index}]", depth + 1) for index, item in enumerate(value)]
+    return None
 
 
 def _converted_value(raw, validated, location: str) -> str | None:

@@ -1,0 +1,85 @@
+"""SIGINT, SIGTERM and SIGHUP during a run: one interrupt, then a shutdown no signal breaks.
+
+The first of them raises :class:`Interrupted` in the main thread (a
+``KeyboardInterrupt``, so every atomic write on the way removes its
+temporary file); every later one is only recorded, so the outputs are
+written whole and the exit code is ``128 + the first signal`` (130, 143,
+129).  While the handlers are *calm* (the start and the end of a run, when
+files are being written), a signal is recorded only; arming them again
+raises it then.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+
+#: the signals that end a run as an interrupt, and their exit codes (128 + the number)
+HANDLED = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGHUP: 129}
+
+
+class Interrupted(KeyboardInterrupt):
+    """A run ended by a signal (Ctrl-C, ``kill``, a closed terminal)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+        self.name = signal.Signals(signum).name
+        self.exit_code = HANDLED.get(signum, 128 + signum)
+
+
+class RunSignals:
+    """A context in which :data:`HANDLED` signals end the run as one :class:`Interrupted`.
+
+    Entered calm (a signal is recorded, not raised); :meth:`arm` lets the
+    next one raise (and raises one recorded meanwhile), :meth:`calm` stops
+    that.  At most one :class:`Interrupted` is ever raised.  Outside the
+    main thread, where Python cannot handle signals, it does nothing.
+    """
+
+    def __init__(self):
+        self.received: int | None = None
+        self.armed = False
+        self.raised = False
+        self._previous: dict = {}
+
+    def __enter__(self) -> "RunSignals":
+        if threading.current_thread() is threading.main_thread():
+            for signum in HANDLED:
+                if signal.getsignal(signum) is signal.SIG_IGN:
+                    continue  # ignored by who started us (nohup, a background job): it stays so
+                self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        # after a signal the process is ending as interrupted: more of them (a burst of
+        # Ctrl-C) are ignored to its exit, where Python's handler would raise in the middle
+        # of the last line, or kill the process by the signal
+        for signum, previous in self._previous.items():
+            if self.received is not None:
+                signal.signal(signum, signal.SIG_IGN)
+            else:
+                signal.signal(signum, previous if previous is not None else signal.SIG_DFL)
+        self._previous.clear()
+
+    def _handle(self, signum, frame) -> None:
+        if self.received is None:
+            self.received = signum
+        if self.armed:
+            self._raise()
+
+    def _raise(self) -> None:
+        self.armed = False
+        if not self.raised:
+            self.raised = True
+            raise Interrupted(self.received)
+
+    def arm(self) -> None:
+        """Let a signal raise :class:`Interrupted`; one received while calm is raised now."""
+        self.armed = True
+        if self.received is not None:
+            self._raise()
+
+    def calm(self) -> None:
+        """Signals from now on are recorded only."""
+        self.armed = False

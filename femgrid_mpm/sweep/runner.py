@@ -1,0 +1,302 @@
+"""Running a sweep's runs on Dask, each into ``DIR/runs/<key>/``, and finding the finished ones.
+
+A run is the run of ``femgrid-mpm run SCENE --set ...`` with the same
+overrides (:func:`compute_run`): its ``summary.json``, ``energy.csv``,
+``final.npz`` and scene files, written by the worker into a temporary
+directory beside ``DIR/runs/<key>/`` and renamed to it when the run has
+ended, so a directory of that name is always a finished run.  Its
+``sweep_run.json`` holds the digest of what it ran (:func:`run_digest`: the
+scene as run, the overrides and the library's version); a later sweep
+reuses the run when the digest is the same and computes it again otherwise.
+``runs.csv`` is rewritten by the client as each run finishes, so a killed
+sweep loses no finished run.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import shutil
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+from .table import RUNS_FILE, row, write_runs
+
+RUNS_DIRECTORY = "runs"
+MARKER_FILE = "sweep_run.json"
+#: a run's directory while it runs: ``.KEY.PID.tmp``, beside its final place
+TEMPORARY_SUFFIX = ".tmp"
+
+
+class SweepProgress(Protocol):
+    """What a sweep reports as it goes (a progress bar, a log)."""
+
+    def started(self, total: int, reused: int, running: list[str]) -> None:
+        """``total`` runs, of which ``reused`` were finished before; ``running`` are those starting."""
+
+    def finished(self, key: str, status: str, running: list[str]) -> None:
+        """The run ``key`` ended with ``status``; ``running`` are those running now."""
+
+
+@dataclass
+class SweepCounts:
+    """How many runs a sweep computed, reused from an earlier sweep, and how many failed."""
+
+    computed: int = 0
+    reused: int = 0
+    failed: int = 0
+    workers: int = 0
+
+
+def run_digest(planned) -> str:
+    """SHA-256 of the scene as run (every default spelled out), the overrides and the
+    library's version: a finished run with the same digest is the same run."""
+    from .. import __version__
+    from ..output import scene_to_toml
+
+    text = "\n".join([scene_to_toml(planned.scene), json.dumps(planned.overrides, sort_keys=True), __version__])
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def finished_summary(directory: Path, digest: str) -> dict | None:
+    """The summary of the finished run in ``directory`` if it ran ``digest``, else None."""
+    from ..output import SUMMARY_FILE
+
+    try:
+        marker = json.loads((directory / MARKER_FILE).read_text())
+        summary = json.loads((directory / SUMMARY_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(marker, dict) or not isinstance(summary, dict) or marker.get("digest") != digest:
+        return None
+    if summary.get("status") not in ("completed", "stopped"):
+        return None
+    summary["workers"] = marker.get("workers")
+    return summary
+
+
+def compute_run(scene_file: str, overrides: dict, directory: str, digest: str, workers: int) -> dict:
+    """Run the scene with ``overrides`` into ``directory`` (on a worker) and return its
+    summary, with ``"warnings"``: the warnings the run gave, one line each.
+
+    A run that stops on a numerical event is a finished run (status ``stopped``).
+
+    Raises
+    ------
+    ValueError
+        If the simulation cannot be built from the scene (e.g. a support selects no node).
+    OSError
+        If the files cannot be written.
+    """
+    from ..diagnostics import SimulationStopped
+    from ..output import RunOutputs, atomic_write
+    from ..scene import load_scene
+    from ..solver import Simulation
+
+    final = Path(directory)
+    temporary = final.with_name(f".{final.name}.{os.getpid()}{TEMPORARY_SUFFIX}")
+    shutil.rmtree(temporary, ignore_errors=True)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            scene = load_scene(scene_file, overrides)
+            outputs = RunOutputs(temporary, scene, source=scene_file, overrides=overrides)
+            _warm_up(scene)
+            simulation = Simulation(scene, observers=outputs.observers)
+            _estimate_critical_dt(simulation)
+            outputs.start(simulation)
+            try:
+                summary = outputs.finish(simulation.run())
+            except SimulationStopped as stop:
+                summary = outputs.finish(stop.result, stop)
+        atomic_write(temporary / MARKER_FILE, json.dumps(
+            {"key": final.name, "digest": digest, "overrides": overrides, "workers": workers}, indent=2) + "\n")
+        _replace_directory(temporary, final)
+    except BaseException:
+        shutil.rmtree(temporary, ignore_errors=True)
+        raise
+    summary["warnings"] = [" ".join(str(w.message).split()) for w in caught]
+    summary["workers"] = workers
+    return summary
+
+
+#: the warm-up run: two steps of a microsecond
+WARM_UP = {"time.dt": 1e-6, "time.end": 2e-6}
+
+
+def _warm_up(scene) -> None:
+    """Step a two-step copy of ``scene``, so that loading its compiled kernels (about a
+    second the first time in a process) is not counted in the wall time of the run."""
+    from ..diagnostics import SimulationStopped
+    from ..solver import Simulation
+
+    try:
+        Simulation(scene.with_overrides(**WARM_UP)).run()
+    except (SimulationStopped, ValueError, ArithmeticError):
+        pass  # the run itself reports what is wrong with its scene
+
+
+def _estimate_critical_dt(simulation) -> None:
+    """The critical step, estimated as ``femgrid-mpm run`` does before a run (it is in the
+    summary); a warning if it exceeds the stable one."""
+    try:
+        critical = simulation.critical_dt
+    except MemoryError:
+        warnings.warn("the critical time step could not be estimated: not enough memory", RuntimeWarning)
+        return
+    if critical is not None and 0 < critical < simulation.dt:
+        warnings.warn(f"dt = {simulation.dt:.6g} s exceeds the estimated critical time step {critical:.6g} s",
+                      RuntimeWarning)
+
+
+def _replace_directory(source: Path, target: Path) -> None:
+    """``source`` renamed to ``target``; an earlier ``target`` (a run of another digest) is removed."""
+    if target.exists():
+        old = target.with_name(f".{target.name}.{os.getpid()}.old")
+        shutil.rmtree(old, ignore_errors=True)
+        os.replace(target, old)
+        os.replace(source, target)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(source, target)
+
+
+def remove_stale(runs_directory: Path) -> None:
+    """Remove the temporary directories of runs a killed sweep left (``.KEY.PID.tmp``, ``.KEY.PID.old``)."""
+    if runs_directory.is_dir():
+        for entry in runs_directory.iterdir():
+            if entry.name.startswith(".") and entry.name.endswith((TEMPORARY_SUFFIX, ".old")) and entry.is_dir():
+                shutil.rmtree(entry, ignore_errors=True)
+
+
+def run_sweep(planned_runs: list, out: Path, *, workers: int | None = None, scheduler: str | None = None,
+              progress: SweepProgress | None = None, prepare=None) -> SweepCounts:
+    """Compute the runs of ``planned_runs`` not finished in ``out`` on Dask and write ``out/runs.csv``.
+
+    Parameters
+    ----------
+    planned_runs : list of PlannedRun
+    out : Path
+        The sweep's directory.
+    workers : int, optional
+        Runs at once on a local cluster (default: the number of cores).
+    scheduler : str, optional
+        An existing Dask scheduler (``tcp://HOST:PORT``); its workers must see ``out``
+        and the scene file at the same paths.
+    progress : SweepProgress, optional
+    prepare : callable, optional
+        Called before anything is written in ``out`` (once the cluster is reached, if a run
+        is missing): a scheduler that cannot be reached leaves ``out`` untouched.
+
+    Raises
+    ------
+    OSError
+        If a scheduler cannot be reached, or ``out`` cannot be written.
+    KeyboardInterrupt
+        After closing the cluster; the finished runs and ``runs.csv`` are kept.
+    """
+    out = Path(out)
+    runs_directory = out / RUNS_DIRECTORY
+    varied = list(planned_runs[0].varied) if planned_runs else []
+    digests = {planned.key: run_digest(planned) for planned in planned_runs}
+    rows: dict[str, dict] = {}
+    missing = []
+    for planned in planned_runs:
+        summary = finished_summary(runs_directory / planned.key, digests[planned.key])
+        if summary is None:
+            missing.append(planned)
+        else:
+            rows[planned.key] = row(planned, summary, summary.get("workers"))
+
+    def write_table() -> None:
+        write_runs(out / RUNS_FILE, varied, [rows[p.key] for p in planned_runs if p.key in rows])
+
+    def start() -> None:
+        if prepare is not None:
+            prepare()
+        runs_directory.mkdir(parents=True, exist_ok=True)
+        remove_stale(runs_directory)
+        write_table()
+
+    counts = SweepCounts(reused=len(rows))
+    if not missing:
+        start()
+        if progress is not None:
+            progress.started(len(planned_runs), len(rows), [])
+        return counts
+    with _dask_client(workers, scheduler) as (client, concurrency):
+        from dask.distributed import as_completed
+
+        start()
+        counts.workers = concurrency
+        futures = {
+            client.submit(compute_run, str(planned.scene_file), planned.overrides, str(runs_directory / planned.key),
+                          digests[planned.key], concurrency, key=f"femgrid-run-{planned.key}-{digests[planned.key][:12]}",
+                          pure=False): planned
+            for planned in missing
+        }
+        pending = list(futures)
+        if progress is not None:
+            progress.started(len(planned_runs), len(rows), [p.key for p in missing[:concurrency]])
+        try:
+            for future in as_completed(list(futures), loop=client.loop):
+                planned = futures[future]
+                pending.remove(future)
+                try:
+                    summary = future.result()
+                except Exception as error:  # noqa: BLE001 - a run that could not run is a row of the table
+                    rows[planned.key] = row(planned, None, concurrency, failure=f"{type(error).__name__}: {error}")
+                    counts.failed += 1
+                else:
+                    rows[planned.key] = row(planned, summary, concurrency)
+                    for message in summary.get("warnings", []):
+                        warnings.warn(f"run {planned.key}: {message}", RuntimeWarning, stacklevel=1)
+                    counts.computed += 1
+                write_table()
+                if progress is not None:
+                    progress.finished(planned.key, rows[planned.key]["status"],
+                                      [futures[f].key for f in pending[:concurrency]])
+        except BaseException:
+            client.cancel(pending)
+            raise
+    remove_stale(runs_directory)  # runs cut short by the end of their workers
+    return counts
+
+
+class _dask_client:
+    """A Dask client on a new local cluster (``workers`` processes of one thread each) or on
+    the ``scheduler`` given, closed at the end of the block; with the number of runs at once."""
+
+    def __init__(self, workers: int | None, scheduler: str | None):
+        self.workers = workers or os.cpu_count() or 1
+        self.scheduler = scheduler
+        self.cluster = self.client = None
+
+    def __enter__(self):
+        from dask.distributed import Client, LocalCluster
+
+        if self.scheduler:
+            try:
+                self.client = Client(self.scheduler, timeout="10s", set_as_default=False)
+            except (OSError, TimeoutError) as error:
+                raise OSError(f"cannot reach the Dask scheduler at {self.scheduler}: {error}") from None
+            concurrency = max(1, sum(self.client.nthreads().values()))
+        else:
+            # one BLAS thread per worker: runs share the cores already
+            self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                        dashboard_address=None, silence_logs=logging.ERROR,
+                                        env={"OPENBLAS_NUM_THREADS": "1"})
+            self.client = Client(self.cluster, set_as_default=False)
+            concurrency = self.workers
+        return self.client, concurrency
+
+    def __exit__(self, *exc):
+        if self.client is not None:
+            self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+        return False

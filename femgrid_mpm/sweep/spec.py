@@ -1,0 +1,249 @@
+"""A sweep file: a scene, the keys that vary and the keys set for every run.
+
+::
+
+    scene = "vibrating_bar"          # a bundled scene's name, or a path (relative to this file)
+    particles = false                # write each run's particle series (default: none)
+    [vary]                           # dotted keys of the scene, as with --set; the runs are the product
+    "grid.basis" = ["q1", "q2"]
+    "grid.spacing" = [0.5, 0.25]
+    [set]                            # dotted keys set in every run
+    "time.end" = 1.0
+    [report]
+    error = "error_max"              # the error the report compares: error_max or error_end
+    targets = [0.01, 0.001, 0.0001]  # the target errors the report answers for
+
+:func:`plan` checks every combination (the scene loaded with its overrides)
+before anything runs; a problem is a :class:`SweepError`, one line naming the
+sweep file and the key.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+#: the keys of a run that name its place on the spacing and time-step axes of the report
+SPACING_KEY = "grid.spacing"
+TIME_STEP_KEYS = ("time.dt", "time.safety")
+#: the sweep files shipped with the package
+BUNDLED_SWEEPS = Path(__file__).parent.parent / "sweeps"
+#: a run's directory name is at most this long (a longer one ends in a hash)
+MAX_KEY_LENGTH = 80
+
+Scalar = str | int | float | bool
+
+
+class SweepError(ValueError):
+    """A sweep file that cannot be used; the message is one line naming the file and the key."""
+
+
+class ReportSpec(BaseModel):
+    """``[report]``: the error compared and the target errors answered for."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    error: Literal["error_max", "error_end"] = "error_max"
+    targets: Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=1)] = [1e-2, 1e-3, 1e-4]
+
+
+class SweepSpec(BaseModel):
+    """A sweep file's tables (see the module's docstring)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    title: str = ""
+    scene: Annotated[str, Field(min_length=1)]
+    particles: bool = False
+    vary: dict[str, Annotated[list[Any], Field(min_length=1)]] = {}
+    set: dict[str, Any] = {}
+    report: ReportSpec = ReportSpec()
+
+
+@dataclass(frozen=True)
+class PlannedRun:
+    """One combination of a sweep: where it goes and what it runs.
+
+    ``varied`` holds the values of the varied keys, ``overrides`` every dotted
+    key set in the scene (``[set]``, then the varied ones), so that
+    ``femgrid-mpm run SCENE --set KEY=VALUE ...`` with ``overrides`` is the same run.
+    """
+
+    key: str
+    varied: dict
+    overrides: dict
+    scene_file: Path
+    scene: Any = field(repr=False, compare=False)
+
+
+def sweep_path(text: str) -> Path:
+    """The sweep file ``text`` names: a path, or the name of a bundled sweep (``bar_convergence``)."""
+    path = Path(text)
+    bundled = BUNDLED_SWEEPS / f"{text}.toml"
+    if not path.exists() and path.suffix != ".toml" and len(path.parts) == 1 and bundled.is_file():
+        return bundled
+    return path
+
+
+def read_sweep(path) -> SweepSpec:
+    """The sweep file at ``path``, checked; raises :class:`SweepError`."""
+    import tomllib
+
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            data = tomllib.load(handle)
+    except FileNotFoundError:
+        raise SweepError(f"{path}: no such sweep file") from None
+    except IsADirectoryError:
+        raise SweepError(f"{path}: is a directory, not a sweep file") from None
+    except tomllib.TOMLDecodeError as error:
+        raise SweepError(_one_line(f"{path}: not valid TOML: {error}")) from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise SweepError(_one_line(f"{path}: cannot be read: {error}")) from None
+    try:
+        spec = SweepSpec.model_validate(data)
+    except ValidationError as error:
+        raise SweepError(_one_line(f"{path}: {_describe(error)}")) from None
+    for key, values in spec.vary.items():
+        for index, value in enumerate(values):
+            if not isinstance(value, Scalar):
+                raise SweepError(f"{path}: {_location(('vary', key, index))}: must be a string, a number or true/false "
+                                 f"(got {type(value).__name__})")
+            if any(_same(value, other) for other in values[:index]):
+                raise SweepError(f"{path}: {_location(('vary', key, index))}: {_shown(value)} is already in the list")
+        if key in spec.set:
+            raise SweepError(f"{path}: {_location(('set', key))}: is also in [vary] (set a key in one of them)")
+    return spec
+
+
+def scene_file(spec: SweepSpec, sweep_path) -> Path:
+    """The scene file a sweep names: a bundled scene's name, or a path relative to the sweep file."""
+    from ..scene import BUNDLED_SCENES
+
+    name = spec.scene
+    if name.endswith(".toml") or "/" in name or "\\" in name:
+        path = Path(name)
+        return path if path.is_absolute() else Path(sweep_path).parent / path
+    bundled = BUNDLED_SCENES / f"{name}.toml"
+    if not bundled.is_file():
+        known = ", ".join(sorted(p.stem for p in BUNDLED_SCENES.glob("*.toml")))
+        raise SweepError(f"{sweep_path}: scene: no bundled scene {name!r} (bundled: {known}; "
+                         f"a file is named by its path, ending in .toml)")
+    return bundled
+
+
+def plan(spec: SweepSpec, sweep_path) -> list[PlannedRun]:
+    """Every combination of ``spec``, each scene loaded with its overrides (checked), in
+    the order of the file: the last key of ``[vary]`` changes fastest.
+
+    Raises
+    ------
+    SweepError
+        The first combination that does not load, naming the sweep file, the combination
+        and the scene's key.
+    """
+    from ..scene import SceneError, load_scene
+
+    path = scene_file(spec, sweep_path)
+    if not path.is_file():
+        raise SweepError(f"{sweep_path}: scene: no such scene file {str(path)!r}")
+    path = path.absolute()
+    try:
+        base = load_scene(path, spec.set)
+    except SceneError as error:
+        raise SweepError(f"{sweep_path}: set: {error}") from None
+    fixed = dict(spec.set)
+    if base.output is not None and base.output.particles and not spec.particles:
+        fixed["output.particles"] = False  # a sweep's runs write no particle series unless asked
+    keys = list(spec.vary)
+    combinations = [dict(zip(keys, values)) for values in itertools.product(*spec.vary.values())]
+    names = run_keys(combinations)
+    runs = []
+    for name, varied in zip(names, combinations):
+        overrides = {**fixed, **varied}
+        try:
+            scene = load_scene(path, overrides)
+        except SceneError as error:
+            raise SweepError(f"{sweep_path}: vary: run {name}: {error}") from None
+        runs.append(PlannedRun(name, varied, overrides, path, scene))
+    return runs
+
+
+def run_keys(combinations: list[dict]) -> list[str]:
+    """Directory names of the runs: the varied values, slugified and joined by ``-``
+    (``q2-consistent-0.25``); a name that would be too long or is taken twice ends in a
+    hash of its values instead.
+
+    >>> run_keys([{"grid.basis": "q2", "grid.spacing": 0.25}, {"grid.basis": "Q2", "grid.spacing": 0.25},
+    ...           {"grid.basis": "q1", "grid.spacing": 0.25}])
+    ['q2-0.25-edf429a7', 'q2-0.25-dd1ec223', 'q1-0.25']
+    >>> run_keys([{}])
+    ['run']
+    """
+    slugs = ["-".join(_slug(value) for value in varied.values()) or "run" for varied in combinations]
+    names = []
+    for slug, varied in zip(slugs, combinations):
+        if len(slug) > MAX_KEY_LENGTH or slugs.count(slug) > 1:
+            digest = hashlib.sha256(json.dumps(varied, sort_keys=True).encode()).hexdigest()[:8]
+            slug = f"{slug[: MAX_KEY_LENGTH - 9]}-{digest}"
+        names.append(slug)
+    return names
+
+
+def _slug(value: Scalar) -> str:
+    if isinstance(value, bool):
+        text = "true" if value else "false"
+    elif isinstance(value, float):
+        text = repr(value)
+    else:
+        text = str(value)
+    return re.sub(r"[^a-z0-9.+]", "_", text.lower()).strip(".") or "_"
+
+
+def _same(a, b) -> bool:
+    return type(a) is type(b) and a == b
+
+
+def _shown(value) -> str:
+    return json.dumps(value) if isinstance(value, str) else (str(value).lower() if isinstance(value, bool) else repr(value))
+
+
+def _describe(error: ValidationError) -> str:
+    """The first problem of a sweep file, as ``key: message``."""
+    first = error.errors(include_url=False)[0]
+    location = _location(first["loc"])
+    kind = first["type"]
+    if kind == "extra_forbidden":
+        known = {(): SweepSpec, ("report",): ReportSpec}.get(tuple(first["loc"][:-1]))
+        fields = f" (keys: {', '.join(known.model_fields)})" if known is not None else ""
+        return f"{location}: unknown key{fields}"
+    if kind == "missing":
+        return f"{location}: is required"
+    if kind == "too_short":
+        return f"{location}: must not be empty"
+    message = first["msg"]
+    if "input" in first and isinstance(first["input"], (str, int, float, bool)):
+        message += f" (got {_shown(first['input'])})"
+    return f"{location}: {message}"
+
+
+def _location(parts) -> str:
+    """``vary."grid.basis"[0]``: a location in the file, dotted keys quoted as in TOML."""
+    text = ""
+    for part in parts:
+        if isinstance(part, int):
+            text += f"[{part}]"
+        else:
+            part = json.dumps(part) if "." in part else part
+            text += f".{part}" if text else part
+    return text
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())

@@ -1,0 +1,40 @@
+"""The cost-accuracy case's table of orders (``femgrid_mpm.reproduce.cost_accuracy``), on a
+``runs.csv`` written by hand with errors of known order."""
+
+import csv
+
+import pytest
+
+from femgrid_mpm.reproduce.cost_accuracy import SWEEPS, order_table
+from femgrid_mpm.sweep import plan, read_sweep
+from femgrid_mpm.sweep.spec import BUNDLED_SWEEPS
+from femgrid_mpm.sweep.table import DESCRIPTION_COLUMNS, RESULT_COLUMNS
+
+
+def test_the_order_table_fits_the_order_of_each_method(tmp_path):
+    """Errors ``e = 3 h^2`` (q1) and ``e = 0.5 h`` (bspline3) give orders 2 and 1 to 1e-12; a
+    stopped run is left out."""
+    (tmp_path / "sweep.toml").write_text('scene = "vibrating_bar_exact"\n[vary]\n"grid.basis" = ["q1", "bspline3"]\n'
+                                         '"grid.spacing" = [0.5, 0.25, 0.125]\n')
+    header = ["grid.basis", "grid.spacing", *RESULT_COLUMNS, *DESCRIPTION_COLUMNS]
+    with open(tmp_path / "runs.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, header)
+        writer.writeheader()
+        for basis, error in (("q1", lambda h: 3 * h**2), ("bspline3", lambda h: 0.5 * h)):
+            for h in (0.5, 0.25, 0.125):
+                writer.writerow({"grid.basis": basis, "grid.spacing": h, "status": "completed",
+                                 "error_max": error(h), "error_end": error(h)})
+        writer.writerow({"grid.basis": "q1", "grid.spacing": 0.0625, "status": "stopped", "error_max": 9.0})
+    orders, table = order_table(tmp_path)
+    assert orders["q1"] == pytest.approx(2.0, abs=1e-12)
+    assert orders["bspline3"] == pytest.approx(1.0, abs=1e-12)
+    assert "| q1 | 0.75 | 0.188 | 0.0469 |  | 2.00 |" in table
+
+
+@pytest.mark.parametrize("name", SWEEPS)
+def test_every_bundled_sweep_plans(name):
+    """Each sweep of the case reads and every one of its combinations validates (nothing runs)."""
+    path = BUNDLED_SWEEPS / f"{name}.toml"
+    runs = plan(read_sweep(path), path)
+    assert len(runs) == {"bar_convergence": 60, "manufactured_convergence": 60, "cantilever_convergence": 12,
+                         "bar_time_steps": 16}[name]

@@ -1,0 +1,237 @@
+"""Results that must not be silently wrong: bodies of very different densities, the state
+after the last step, a second run, units slips, the energy balance."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from femgrid_mpm.diagnostics import ENERGY_DRIFT_LIMIT, EnergyDriftWarning, ScaleWarning, SimulationStopped
+from femgrid_mpm.scene import Scene, bundled_scene
+from femgrid_mpm.solver import Simulation
+
+#: a body 1e12 times lighter than the other: E / density as for a soft solid, p-wave speed ~120 m/s
+LIGHT = {"E": 1e-2, "nu": 0.3, "density": 1e-6}
+HEAVY = {"E": 1e4, "nu": 0.3, "density": 1e6}
+
+
+def pair_scene(with_heavy=True, heavy_at=3.0, contact=None, basis="q1", mass="lumped", engine="numba",
+               dt=1e-3, end=0.02) -> Scene:
+    """A light block [0.5, 1.5] x [0.5, 1] stretched by its initial velocity, and (optionally)
+    a heavy block at rest from ``heavy_at`` (3.0: no node shared; 1.5: touching)."""
+    bodies = [{"name": "light", "lower": [0.5, 0.5], "upper": [1.5, 1.0], "points_per_cell": 2,
+               "velocity": ["0.1*(x-1.0)", "0"], "material": LIGHT}]
+    if with_heavy:
+        bodies.append({"name": "heavy", "lower": [heavy_at, 0.5], "upper": [heavy_at + 1.0, 1.0],
+                       "points_per_cell": 2, "material": HEAVY})
+    data = {"grid": {"basis": basis, "lower": [0, 0], "upper": [5, 1.5], "spacing": 0.25},
+            "time": {"dt": dt, "end": end}, "solver": {"mass": mass, "engine": engine, "negative_mass": "warn",
+                                                       "consistent_fallback": "blend"},
+            "bodies": bodies}
+    if contact:
+        data["contact"] = {"kind": contact}
+    return Scene.model_validate(data)
+
+
+def light_displacement(scene: Scene) -> np.ndarray:
+    simulation = Simulation(scene)
+    result = simulation.run()
+    assert result.status == "completed"
+    p = result.particles
+    return (p.x - p.x0)[p.body == 0]
+
+
+@pytest.mark.parametrize("basis, mass, engine, tolerance", [
+    ("q1", "lumped", "numba", 1e-12), ("q1", "lumped", "scipy", 1e-12), ("bspline3", "lumped", "numba", 1e-12),
+    ("q1", "hrz", "numba", 1e-12),
+    # one matrix for both bodies, its entries 1e12 apart: the solve's rounding differs (measured 6e-9)
+    ("q1", "consistent", "numba", 1e-6),
+])
+def test_a_light_body_moves_as_when_alone(basis, mass, engine, tolerance):
+    """Far from a body 1e12 times heavier, sharing no node, the light body moves as it does
+    alone (its nodes were empty against the heavy body's full cell: it moved rigidly)."""
+    alone = light_displacement(pair_scene(with_heavy=False, basis=basis, mass=mass, engine=engine))
+    beside = light_displacement(pair_scene(basis=basis, mass=mass, engine=engine))
+    assert np.abs(alone).max() > 2e-5  # it does move: 5.4e-5 m at its ends (q1 lumped)
+    np.testing.assert_allclose(beside, alone, rtol=0, atol=tolerance * np.abs(alone).max())
+
+
+def test_frictional_fields_measure_empty_by_their_own_body():
+    """One field per body: each body's field is empty or not against its own full cell."""
+    alone = light_displacement(pair_scene(with_heavy=False, engine="scipy"))
+    beside = light_displacement(pair_scene(contact="frictional"))
+    np.testing.assert_allclose(beside, alone, rtol=0, atol=1e-12 * np.abs(alone).max())
+
+
+def test_the_critical_step_sees_the_light_body():
+    """In contact with a heavy body the critical step is the light body's (it was 3.39 s,
+    the heavy body's, against 3.39e-3 s for the light body alone)."""
+    alone = Simulation(pair_scene(with_heavy=False)).critical_dt
+    far = Simulation(pair_scene()).critical_dt
+    frictional = Simulation(pair_scene(heavy_at=1.5, contact="frictional")).critical_dt
+    shared = Simulation(pair_scene(heavy_at=1.5, contact="shared")).critical_dt
+    assert 1e-3 < alone < 1e-2
+    assert far == pytest.approx(alone, rel=1e-9)  # nothing couples them: the lighter's
+    assert frictional == pytest.approx(alone, rel=1e-9)  # each body in its own field
+    # glued at the shared nodes, a little stiffer or softer than alone: within 5%
+    assert shared == pytest.approx(alone, rel=0.05)
+
+
+def test_auto_step_with_a_light_body_in_contact_stays_stable():
+    """``dt = "auto"`` takes the light body's step and the run keeps its energy."""
+    scene = pair_scene(heavy_at=1.5, contact="shared").with_overrides(**{"time.dt": "auto", "time.end": 0.05})
+    simulation = Simulation(scene)
+    result = simulation.run()
+    assert result.status == "completed"
+    assert simulation.dt < 0.01  # the heavy body's step would be ~3 s
+    assert simulation.n_steps > 10
+
+
+# -- the state after the last step -------------------------------------------------------------
+
+def without_output(scene: Scene) -> Scene:
+    data = scene.model_dump(mode="json", exclude_none=True)
+    data.pop("output", None)
+    return Scene.model_validate(data)
+
+
+@pytest.mark.parametrize("recorded", [True, False])
+def test_the_state_after_the_last_step_is_guarded(recorded):
+    """One step at 4.6 times the critical step: the energy it ends with is checked (the run
+    reported "completed" with 77 times the initial energy)."""
+    bar = bundled_scene("vibrating_bar")
+    critical = Simulation(bar).critical_dt
+    scene = bar.with_overrides(**{"time.dt": 4.6 * critical, "time.end": 4.6 * critical})
+    simulation = Simulation(scene if recorded else without_output(scene))
+    assert simulation.n_steps == 1
+    with pytest.raises(SimulationStopped) as stop:
+        simulation.run()
+    assert stop.value.reason == "runaway_energy"
+    assert stop.value.step == 1  # after the last step, not before it
+    assert stop.value.result.status == "stopped"
+
+
+def test_a_stable_run_ends_completed_after_the_final_check(block_scene):
+    simulation = Simulation(block_scene(end=0.1))
+    assert simulation.run().status == "completed"
+
+
+# -- a second run() ------------------------------------------------------------------------------
+
+def test_a_second_run_is_refused(block_scene):
+    """A completed (or stopped) run is not run again: a second call appended a second
+    final record at the same time."""
+    scene = block_scene(end=0.1, every=1).with_overrides(**{"output.energy": True})
+    simulation = Simulation(scene)
+    result = simulation.run()
+    records = len(simulation.energy.rows)
+    assert records == simulation.n_steps + 1  # every step's start and the end
+    with pytest.raises(ValueError, match=r"has completed \(step 10, t = 0.1 s\).*time\.end"):
+        simulation.run()
+    assert len(simulation.energy.rows) == records
+    assert simulation.step_index == 10 and result.status == "completed"
+
+
+def test_a_stopped_run_is_not_run_again():
+    bar = bundled_scene("vibrating_bar")
+    critical = Simulation(bar).critical_dt
+    simulation = Simulation(bar.with_overrides(**{"time.dt": 4.6 * critical, "time.end": 10 * critical}))
+    with pytest.raises(SimulationStopped):
+        simulation.run()
+    with pytest.raises(ValueError, match="has stopped"):
+        simulation.run()
+
+
+# -- units slips -----------------------------------------------------------------------------------
+
+def test_a_spacing_in_millimetres_warns_and_info_states_the_end_reached(run_cli, tmp_path):
+    """``spacing = 250`` for a bar 5 x 1 m: one point per body (a warning), an auto step longer
+    than the run (a warning), and info's end time is the run's (it said t = 1 s, the run
+    ended at 13.5 s)."""
+    scene = bundled_scene("vibrating_bar").with_overrides(
+        **{"grid.spacing": 250.0, "time.dt": "auto", "time.end": 1.0})
+    with pytest.warns(ScaleWarning) as caught:
+        simulation = Simulation(scene)
+    messages = [str(w.message) for w in caught if issubclass(w.category, ScaleWarning)]
+    assert any("1 point(s) across" in m and "fewer than the 2 that q1 needs" in m for m in messages)
+    assert any(m.startswith(f"dt = {simulation.dt:.6g} s (auto) exceeds time.end = 1 s") for m in messages)
+    assert simulation.dt > 1.0 and simulation.n_steps == 1
+    result = simulation.run()
+    assert result.summary["time"] == simulation.end_time == simulation.dt
+
+    path = tmp_path / "slip.toml"
+    path.write_text(bundled_scene_text("vibrating_bar"))
+    code, out, err = run_cli(["info", path, "--set", "grid.spacing=250", "--set", "time.dt='auto'",
+                              "--set", "time.end=1"])
+    assert code == 0
+    steps = next(line for line in out.splitlines() if line.startswith("steps:"))
+    assert steps.split(None, 1)[1] == (f"1 to t = {simulation.end_time:.6g} s "
+                                       "(time.end = 1 s, rounded up to whole steps)")
+    assert "point(s) across" in err and "exceeds time.end" in err
+
+
+def bundled_scene_text(name: str) -> str:
+    from importlib.resources import files
+
+    return (files("femgrid_mpm") / "scenes" / f"{name}.toml").read_text()
+
+
+@pytest.mark.parametrize("name", ["vibrating_bar", "cantilever", "box_impact"])
+@pytest.mark.parametrize("basis", ["q1", "q2", "serendipity", "bspline3"])
+def test_the_paper_scenes_are_not_units_slips(name, basis):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ScaleWarning)
+        Simulation(bundled_scene(name).with_overrides(**{"grid.basis": basis}))
+
+
+def test_a_body_thinner_than_the_cubic_support_warns(block_scene):
+    """Cubic B-splines span 4 spacings: a body 3 points thick is seen from one side."""
+    scene = block_scene("bspline3", upper=(1.75, 1.0), points_per_cell=3)  # 0.5 m thick: 3 points
+    with pytest.warns(ScaleWarning, match=r"3 point\(s\) across in y, fewer than the 4 that bspline3 needs"):
+        Simulation(scene)
+
+
+# -- the energy balance ------------------------------------------------------------------------------
+
+def test_energy_drift_is_recorded_and_warned_once():
+    """Frictional contact at dt = 0.005 to t = 1.5 s: the balance is off by 15% of the energy
+    scale; ``energy_drift`` is the last total error over the largest kinetic + strain +
+    |external work| of the records, and one warning names the remedy."""
+    scene = bundled_scene("box_impact").with_overrides(**{"contact.kind": "frictional", "time.end": 1.5})
+    simulation = Simulation(scene)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = simulation.run()
+    table = result.energy
+    scale = np.max(table["kinetic"] + table["strain"] + np.abs(table["external_work"]))
+    expected = table["total_error"][-1] / scale
+    assert result.summary["energy_drift"] == pytest.approx(expected, rel=1e-12)
+    assert expected == pytest.approx(0.152, rel=0.01)
+    drifts = [w for w in caught if issubclass(w.category, EnergyDriftWarning)]
+    assert len(drifts) == 1
+    assert "time.safety" in str(drifts[0].message) and f"{expected:.3g}" in str(drifts[0].message)
+
+
+def test_the_advice_lowers_the_drift():
+    """Half the step (the warning's advice) brings the frictional box under the limit: 0.087
+    against 0.152, about first order in dt; no warning then."""
+    scene = bundled_scene("box_impact").with_overrides(
+        **{"contact.kind": "frictional", "time.end": 1.5, "time.dt": 0.0025})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", EnergyDriftWarning)
+        drift = Simulation(scene).run().summary["energy_drift"]
+    assert 0.0 < drift < ENERGY_DRIFT_LIMIT
+    assert drift == pytest.approx(0.0874, rel=0.01)
+
+
+def test_shared_contact_keeps_its_balance_without_a_warning():
+    """The paper's box impact (shared contact, dt = 0.005) is off by 1% at t = 1.5 s."""
+    scene = bundled_scene("box_impact").with_overrides(**{"time.end": 1.5})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", EnergyDriftWarning)
+        drift = Simulation(scene).run().summary["energy_drift"]
+    assert abs(drift) < 0.02
+
+
+def test_energy_drift_is_none_without_energy_records(block_scene):
+    assert Simulation(block_scene(end=0.05, every=None)).run().summary["energy_drift"] is None

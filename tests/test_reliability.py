@@ -1,0 +1,516 @@
+"""The reliability contract (docs/reliability.md): bad input is one line and exit code 2
+before anything is written; the input and earlier outputs are never lost; streams,
+signals and damaged checkpoints end in the documented code, never a traceback.
+
+References are independent of the code under test: the bytes and modification times
+of files that must be kept, step counts ``ceil(end / dt)`` by hand, overlapping pairs
+of rectangles by brute force, exit codes 128 + the signal's number.
+"""
+
+import json
+import re
+import os
+import signal
+import subprocess
+import sys
+import time
+import warnings
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from femgrid_mpm import cli
+from femgrid_mpm.checkpoint import read_checkpoint, write_checkpoint
+from femgrid_mpm.expressions import ExpressionError, compile_expression
+from femgrid_mpm.particles import overlapping_pairs, warn_of_overlaps
+from femgrid_mpm.scene import Scene, SceneError, bundled_scene
+from femgrid_mpm.solver import Simulation
+from helpers import run_cli
+
+ROOT = Path(__file__).parents[1]
+VIBRATING_BAR = ROOT / "scenes" / "vibrating_bar.toml"
+ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
+#: a block moving in a 4 x 3 grid: 20 steps of 0.01 s, 16 points, a record every 5 steps
+BLOCK = """\
+title = "block"
+
+[grid]
+lower = [0.0, 0.0]
+upper = [4.0, 3.0]
+spacing = 0.5
+
+[time]
+dt = 0.01
+end = 0.2
+
+[[bodies]]
+name = "block"
+lower = [0.75, 0.5]
+upper = [1.75, 1.5]
+velocity = [1.0, 0.25]
+material = { E = 1.0e4, nu = 0.3, density = 1.0e3 }
+
+[output]
+every = 5
+"""
+
+
+def one_line_error(err: str, *needles) -> str:
+    assert "Traceback" not in err, err
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("femgrid-mpm: error: "), err
+    for needle in needles:
+        assert needle in lines[0], (needle, err)
+    return lines[0]
+
+
+def snapshot(directory: Path) -> dict:
+    """Every file below ``directory``: its bytes and modification time."""
+    return {p.relative_to(directory): (p.read_bytes(), p.stat().st_mtime_ns)
+            for p in sorted(directory.rglob("*")) if p.is_file()}
+
+
+def cli_process(*argv, **options) -> subprocess.Popen:
+    """``femgrid-mpm ARGV`` in its own process, SIGINT handled as in a terminal."""
+    options.setdefault("stdout", subprocess.DEVNULL)
+    options.setdefault("stderr", subprocess.PIPE)
+    return subprocess.Popen([sys.executable, "-m", "femgrid_mpm.cli", *map(str, argv)], env=ENV, cwd=ROOT,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **options)
+
+
+@pytest.fixture
+def block_file(tmp_path) -> Path:
+    path = tmp_path / "block.toml"
+    path.write_text(BLOCK)
+    return path
+
+
+# -- the input and earlier outputs are never lost ----------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["scene.toml", "source_scene.toml", "energy.csv", "final.npz", "summary.json",
+                                  "checkpoint.npz", "particles.pvd"])
+def test_a_run_never_writes_over_its_scene_file(tmp_path, capsys, name):
+    """``run d/NAME --out d`` for every name the run writes: exit 2, one line naming the
+    file, and the directory exactly as it was (the scene's bytes included)."""
+    directory = tmp_path / "d"
+    directory.mkdir()
+    scene = directory / name
+    scene.write_text(BLOCK)
+    (directory / "notes.txt").write_text("an earlier file")
+    before = snapshot(directory)
+    code, out, err = run_cli(["run", scene, "--out", directory, "--no-progress"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, str(scene), "is the scene file given")
+    assert snapshot(directory) == before
+
+
+@pytest.mark.parametrize("link", ["symbolic", "hard"])
+def test_a_link_to_the_scene_file_among_the_outputs_is_refused(tmp_path, capsys, link):
+    scene = tmp_path / "mine.toml"
+    scene.write_text(BLOCK)
+    out = tmp_path / "out"
+    out.mkdir()
+    (os.symlink if link == "symbolic" else os.link)(scene, out / "scene.toml")
+    before = snapshot(tmp_path)
+    code, _, err = run_cli(["run", scene, "--out", out, "--no-progress"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "is the scene file given")
+    assert snapshot(tmp_path) == before
+
+
+def test_a_scene_elsewhere_runs_into_a_directory_with_an_earlier_run(tmp_path, capsys, block_file):
+    """The refusal is about the scene file only: the same scene from elsewhere runs and
+    replaces the earlier outputs (16 points moving at (1, 0.25) m/s for 0.2 s)."""
+    out = tmp_path / "out"
+    assert run_cli(["run", block_file, "--out", out, "--no-progress"], capsys)[0] == cli.EXIT_DONE
+    copy = tmp_path / "again.toml"
+    copy.write_bytes((out / "scene.toml").read_bytes())
+    assert run_cli(["run", copy, "--out", out, "--no-progress"], capsys)[0] == cli.EXIT_DONE
+    final = np.load(out / "final.npz")
+    np.testing.assert_allclose(final["x"] - final["x0"], np.tile([0.2, 0.05], (16, 1)), atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["energy.csv", "final.npz", "summary.json"])
+def test_a_directory_in_the_place_of_an_output_is_refused_before_writing(tmp_path, capsys, block_file, name):
+    out = tmp_path / "out"
+    (out / name).mkdir(parents=True)
+    code, _, err = run_cli(["run", block_file, "--out", out, "--no-progress"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, f"{name}: is a directory")
+    assert sorted(p.name for p in out.iterdir()) == [name]
+
+
+# -- a limit on the steps and on the records, for every way of giving dt --------------------------
+
+
+@pytest.mark.parametrize("settings, steps", [
+    (["time.dt=auto", "time.safety=1e-300"], "e+301 steps"),
+    (["time.dt=auto", "time.safety=5e-324"], "infinitely many steps"),  # dt = 0 (was ZeroDivisionError)
+    (["time.end=1e300"], "3.33e+302 steps"),  # 1e300 / 0.003
+    (["time.dt=auto", "bodies.0.material.E=1e30", "bodies.0.material.density=1e-30"], "e+31 steps"),
+])
+def test_absurd_step_counts_are_refused_before_anything_is_removed(tmp_path, capsys, settings, steps):
+    """An earlier run's outputs stay byte for byte; the line names the steps and the key."""
+    out = tmp_path / "out"
+    argv = ["run", VIBRATING_BAR, "--out", out, "--no-progress", "--set", "time.end=0.03"]
+    assert run_cli(argv, capsys)[0] == cli.EXIT_DONE
+    before = snapshot(out)
+    code, _, err = run_cli(["run", VIBRATING_BAR, "--out", out, "--no-progress",
+                            *[a for s in settings for a in ("--set", s)]], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "time.dt", steps, "time.max_steps")
+    assert snapshot(out) == before
+
+
+def test_the_step_limit_is_exact_and_raised_by_time_max_steps(tmp_path, capsys, block_file):
+    """20 steps (0.2 s / 0.01 s): refused under a limit of 19, run under 20."""
+    code, _, err = run_cli(["info", block_file, "--set", "time.max_steps=19"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "time.dt", "20 steps, more than the limit of 19")
+    code, out, _ = run_cli(["info", block_file, "--set", "time.max_steps=20"], capsys)
+    assert code == cli.EXIT_DONE and re.search(r"^steps: +20 to t = 0.2 s$", out, flags=re.M)
+    # dt = "auto" the same way: info's own step count, then one fewer as the limit
+    code, out, _ = run_cli(["info", block_file, "--set", "time.dt=auto"], capsys)
+    auto_steps = int(next(line for line in out.splitlines() if line.startswith("steps:")).split()[1])
+    code, _, err = run_cli(["info", block_file, "--set", "time.dt=auto", "--set", f"time.max_steps={auto_steps - 1}"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "time.dt", f"{auto_steps} steps", "time.max_steps")
+
+
+def test_records_beyond_output_max_bytes_are_refused(tmp_path, capsys):
+    """The bar for 8e4 s at 0.003 s: 2.67e7 steps (under the step limit), a record each:
+    about 26.7 GB of energy rows at 1 kB, over the 10 GB default; every 10 steps fits."""
+    code, _, err = run_cli(["info", VIBRATING_BAR, "--set", "time.end=8e4"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "output.every", "26.7 GB", "output.max_bytes")
+    assert run_cli(["info", VIBRATING_BAR, "--set", "time.end=8e4", "--set", "output.every=10"], capsys)[0] == cli.EXIT_DONE
+    # particle files count their points: 2669 records of 1 kB + 2 kB + 180 points x 120 B: 65.7 MB
+    code, _, err = run_cli(["info", VIBRATING_BAR, "--set", "output.particles=true", "--set", "output.max_bytes=60000000"],
+                           capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "(energy and particles)", "0.0657 GB")
+
+
+def test_the_library_refuses_the_same_step_counts_and_builds_long_records(tmp_path):
+    """A simulation may be built to be stepped a few times: its records' size is the
+    command line's check, its steps are the library's."""
+    scene = bundled_scene("vibrating_bar").with_overrides(**{"time.dt": "auto", "time.safety": 1e-300})
+    with pytest.raises(ValueError, match=r"time\.dt: .* steps, more than the limit"):
+        Simulation(scene)
+    long = bundled_scene("vibrating_bar").with_overrides(**{"time.end": 8e4})
+    assert Simulation(long).n_steps == 26666667  # ceil(8e4 / 0.003)
+
+
+# -- tracebacks and hangs ------------------------------------------------------------------------
+
+
+def test_toml_nested_3000_deep_is_one_line(tmp_path, capsys, block_file):
+    deep = tmp_path / "deep.toml"
+    deep.write_text(BLOCK + "deep = " + "[" * 3000 + "]" * 3000 + "\n")
+    code, _, err = run_cli(["info", deep], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "nested too deeply")
+    code, _, err = run_cli(["info", block_file, "--set", "title=" + "[" * 3000 + "]" * 3000], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "--set title", "nested too deeply")
+
+
+def test_nesting_the_toml_reader_takes_is_refused_by_key(tmp_path, capsys, block_file):
+    """100 levels parse, but are deeper than any scene key: refused naming the key."""
+    code, _, err = run_cli(["info", block_file, "--set", "output.every=" + "[" * 100 + "]" * 100], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "output.every", "nested more than 32 levels deep")
+
+
+def test_names_longer_than_the_file_system_allows_are_one_line(tmp_path, capsys, block_file):
+    long = tmp_path / ("a" * 300)
+    for argv in (["run", block_file, "--out", long], ["resume", long], ["info", str(long) + ".toml"]):
+        code, _, err = run_cli(argv, capsys)
+        assert code == cli.EXIT_BAD_INPUT, argv
+        one_line_error(err, "File name too long")
+
+
+def test_stdout_on_a_full_device_is_exit_1_in_one_line(block_file):
+    with open("/dev/full", "w") as full:
+        process = cli_process("info", block_file, stdout=full)
+        err = process.communicate(timeout=120)[1].decode()
+    assert process.returncode == cli.EXIT_WRITE_FAILED
+    assert err.splitlines() == ["femgrid-mpm: error: cannot write to standard output: No space left on device"]
+
+
+@pytest.mark.parametrize("command", ["info", "run", "help"])
+def test_a_closed_pipe_on_stdout_ends_quietly_with_the_commands_code(tmp_path, block_file, command):
+    """The reader has gone before anything is printed (it is closed at once, the libraries
+    take a second to load); a run's outputs are complete all the same."""
+    out = tmp_path / "out"
+    argv = {"info": ["info", block_file], "run": ["run", block_file, "--out", out, "--no-progress"],
+            "help": ["--help"]}[command]
+    process = cli_process(*argv, stdout=subprocess.PIPE)
+    process.stdout.close()
+    err = process.stderr.read().decode()
+    assert process.wait(timeout=120) == cli.EXIT_DONE
+    assert err == ""
+    if command == "run":
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["status"] == "completed" and summary["steps"] == 20
+        assert int(np.load(out / "final.npz")["step"]) == 20
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "large"])
+def test_only_regular_files_of_at_most_16_mib_are_read(tmp_path, kind):
+    """A FIFO would block the open for ever, /dev/zero would be read until memory runs
+    out: both are refused at once (the process is bounded by a timeout)."""
+    if kind == "fifo":
+        scene = tmp_path / "scene.toml"
+        os.mkfifo(scene)
+    elif kind == "device":
+        scene = Path("/dev/zero")
+    else:
+        scene = tmp_path / "scene.toml"
+        with scene.open("wb") as handle:
+            handle.truncate(16 * 2**20 + 1)  # sparse: no disk taken
+    for argv in (["info", scene], ["run", scene, "--out", tmp_path / "out"]):
+        process = cli_process(*argv)
+        err = process.communicate(timeout=120)[1].decode()
+        assert process.returncode == cli.EXIT_BAD_INPUT
+        one_line_error(err, str(scene), {"fifo": "a FIFO", "device": "a character device", "large": "more than the 16777216"}[kind])
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_resume_whose_summary_is_a_fifo_does_not_block(tmp_path, block_file):
+    out = tmp_path / "out"
+    assert cli_process("run", block_file, "--out", out, "--checkpoint-every", "5").wait(timeout=120) == 0
+    (out / "summary.json").unlink()
+    os.mkfifo(out / "summary.json")
+    process = cli_process("resume", out, "--no-progress")
+    err = process.communicate(timeout=120)[1].decode()
+    # no status to read: it resumes from step 15 and ends; the FIFO is replaced by the summary
+    assert process.returncode == cli.EXIT_DONE, err
+    assert json.loads((out / "summary.json").read_text())["steps"] == 20
+
+
+def killed_checkpoint(tmp_path, block_file, capsys) -> Path:
+    """A run with checkpoints at steps 5, 10 and 15 whose summary says "running" (killed)."""
+    out = tmp_path / "out"
+    assert run_cli(["run", block_file, "--out", out, "--no-progress", "--checkpoint-every", "5"], capsys)[0] == 0
+    summary = json.loads((out / "summary.json").read_text())
+    (out / "summary.json").write_text(json.dumps({**summary, "status": "running"}))
+    return out
+
+
+@pytest.mark.parametrize("step", [float("inf"), float("nan"), 1e300, 2.5, True])
+def test_a_checkpoint_step_that_is_no_whole_number_is_refused(tmp_path, capsys, block_file, step):
+    out = killed_checkpoint(tmp_path, block_file, capsys)
+    arrays, values = read_checkpoint(out / "checkpoint.npz")
+    values["simulation"]["step"] = step
+    write_checkpoint(out / "checkpoint.npz", arrays, {k: v for k, v in values.items() if k != "format"})
+    before = snapshot(out)
+    code, _, err = run_cli(["resume", out, "--no-progress"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "does not fit", "step")
+    assert snapshot(out) == before
+
+
+def test_an_array_header_claiming_more_than_its_member_holds_is_refused(tmp_path, capsys, block_file):
+    """A header of 10^12 doubles (8 TB) over the 16 of the file: refused without the
+    allocation (the traced peak stays below a megabyte)."""
+    import tracemalloc
+
+    out = killed_checkpoint(tmp_path, block_file, capsys)
+    path = out / "checkpoint.npz"
+    with zipfile.ZipFile(path) as archive:
+        members = {name: archive.read(name) for name in archive.namelist()}
+    header = {"descr": "<f8", "fortran_order": False, "shape": (10**12,)}
+    import io
+    forged = io.BytesIO()
+    np.lib.format.write_array_header_1_0(forged, header)
+    members["particles.mass.npy"] = forged.getvalue() + np.zeros(16).tobytes()
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, data in members.items():
+            archive.writestr(name, data)
+    before = snapshot(out)
+    tracemalloc.start()
+    try:
+        code, _, err = run_cli(["resume", out, "--no-progress"], capsys)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "particles.mass.npy", "(1000000000000,)")
+    assert peak < 1e6
+    assert snapshot(out) == before
+
+
+def test_overlaps_of_many_bodies_are_found_by_the_sweep_and_summarised(capsys):
+    """4000 random squares: the sweep's pairs equal brute force's; the warning is one line
+    naming the first 3 pairs and counting the rest."""
+    rng = np.random.default_rng(7)
+    lower = rng.uniform(0, 95, size=(4000, 2))
+    lower[:10, 0] = 3.0  # equal left edges, and squares that only touch
+    lower[10, 0] = lower[11, 0] + 4.0
+    upper = lower + 4.0
+    brute = (np.minimum(upper[:, None], upper[None]) > np.maximum(lower[:, None], lower[None])).all(axis=2)
+    expected = np.argwhere(np.triu(brute, k=1))
+    found = overlapping_pairs(lower, upper)
+    np.testing.assert_array_equal(found, expected)
+
+    class Body:
+        def __init__(self, index):
+            self.name, self.lower, self.upper = f"b{index}", tuple(lower[index]), tuple(upper[index])
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        warn_of_overlaps([Body(i) for i in range(4000)])
+    assert len(caught) == 1
+    text = str(caught[0].message)
+    i, j = expected[0]
+    assert text.startswith(f"bodies 'b{i}' and 'b{j}' overlap in ")
+    assert f"and {len(expected) - 3} more pairs" in text and text.count(" overlap in ") == 3
+
+
+# -- messages ------------------------------------------------------------------------------------
+
+
+def test_min_max_state_their_real_argument_limits():
+    arguments = ", ".join(["x"] * 65)
+    with pytest.raises(ExpressionError, match=r"max\(\) takes 2 to 64 arguments, got 65"):
+        compile_expression(f"max({arguments})", ("x",))
+    with pytest.raises(ExpressionError, match=r"sin\(\) takes 1 argument, got 2"):
+        compile_expression("sin(x, x)", ("x",))
+    assert compile_expression("max(" + ", ".join([f"x + {k}" for k in range(64)]) + ")", ("x",))(x=np.array([2.0]))[0] == 65.0
+
+
+@pytest.mark.parametrize("value", ["[true, false]", "[\"0\", 0]"])
+def test_grid_lower_of_booleans_or_strings_names_grid_lower(capsys, block_file, value):
+    code, _, err = run_cli(["info", block_file, "--set", f"grid.lower={value}"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "grid.lower[0]: must be a number")
+
+
+def test_a_crushed_neo_hookean_body_stops_without_numpys_warning(tmp_path, capsys, block_file):
+    """A block thrown at 20 m/s onto a clamped bottom with dt = 0.05 s: one step crushes
+    its points (J < 0); the run stops on a state no longer finite, in one line."""
+    scene = tmp_path / "crush.toml"
+    scene.write_text(BLOCK.replace("velocity = [1.0, 0.25]", "velocity = [0.0, -20.0]")
+                     .replace('material = { E', 'material = { model = "neo_hookean", E')
+                     .replace("dt = 0.01", "dt = 0.05")
+                     + '\n[solver]\nnegative_mass = "warn"\n\n[[supports]]\nwhere = "y <= 0.5"\nfix = ["x", "y"]\n')
+    code, _, err = run_cli(["run", scene, "--out", tmp_path / "out", "--no-progress"], capsys)
+    assert code == cli.EXIT_STOPPED
+    assert "invalid value" not in err and "divide" not in err
+    assert err.splitlines()[-1].startswith("femgrid-mpm: stopped: step 1 ")
+    assert "no longer finite" in err
+
+
+def test_numpy_values_as_overrides_are_lists_and_numbers():
+    scene = bundled_scene("vibrating_bar")
+    changed = scene.with_overrides(**{"grid.lower": np.array([0.0, 0.0]), "grid.spacing": np.array(0.25),
+                                      "bodies.0.points_per_cell": np.int64(2)})
+    assert changed.grid.lower == (0.0, 0.0) and changed.grid.spacing == 0.25 and changed.bodies[0].points_per_cell == 2
+    with pytest.raises(SceneError, match=r"^with grid.lower = \[0.0, 0.0, 1.0\]: grid.lower: must have at most 2 item"):
+        scene.with_overrides(**{"grid.lower": np.array([0.0, 0.0, 1.0])})
+
+
+@pytest.mark.parametrize("value, words", [
+    (None, "scene: must be a dict of the tables of a scene file, got NoneType"),
+    ({"grid": 1}, "scene: grid: must be a table (got 1) (and 2 more problem(s))"),
+    ({"grid": {"lower": [True, 0]}}, "scene: grid.lower[0]: must be a number"),
+])
+def test_the_python_api_refuses_in_one_scene_error_line(value, words):
+    for attempt in (lambda: Scene.model_validate(value), lambda: Simulation(value)):
+        with pytest.raises(SceneError) as error:
+            attempt()
+        assert str(error.value).startswith(words) and "\n" not in str(error.value)
+
+
+# -- signals -------------------------------------------------------------------------------------
+
+
+def long_bar_run(out: Path) -> subprocess.Popen:
+    """The vibrating bar for 100 s (33,334 steps, tens of seconds) with particle output."""
+    return cli_process("run", VIBRATING_BAR, "--out", out, "--no-progress", "--set", "time.end=100",
+                       "--set", "output.every=10", "--set", "output.particles=true")
+
+
+def wait_for_records(process, out: Path, timeout=120.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert process.poll() is None, process.stderr.read().decode()
+        energy = out / "energy.csv"
+        if energy.exists() and len(energy.read_text().splitlines()) > 3:
+            return
+        time.sleep(0.05)
+    raise AssertionError("no records in time")
+
+
+def assert_interrupted_outputs(out: Path) -> dict:
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "interrupted"
+    final = np.load(out / "final.npz")
+    assert int(final["step"]) == summary["steps"] > 0
+    rows = (out / "energy.csv").read_text().splitlines()[1:]
+    last_time = float(rows[-1].split(",")[0])
+    assert last_time <= float(final["time"]) < last_time + 10 * 0.003 + 1e-9  # every record so far
+    # the series has every record, but the one whose file was being written when the signal came
+    assert (out / "particles.pvd").read_text().count("<DataSet ") in (len(rows) - 1, len(rows))
+    return summary
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
+def test_sigterm_and_sighup_end_a_run_as_sigint_does(tmp_path, signum):
+    out = tmp_path / "out"
+    process = long_bar_run(out)
+    try:
+        wait_for_records(process, out)
+        process.send_signal(signum)
+        code = process.wait(timeout=120)
+    finally:
+        process.kill()
+    assert code == 128 + signum == {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGHUP: 129}[signum]
+    err = process.stderr.read().decode().splitlines()
+    assert err[-1].startswith("femgrid-mpm: interrupted: at step ") and "Traceback" not in "".join(err)
+    assert_interrupted_outputs(out)
+
+
+def test_signals_during_the_shutdown_do_not_cut_it(tmp_path):
+    """A burst of 30 SIGINTs and SIGTERMs 2 ms apart, from the first on: the first
+    interrupts, the rest fall on the shutdown and are ignored; exit 130, files whole."""
+    out = tmp_path / "out"
+    process = long_bar_run(out)
+    try:
+        wait_for_records(process, out)
+        for index in range(30):
+            if process.poll() is not None:
+                break
+            process.send_signal(signal.SIGINT if index % 2 == 0 else signal.SIGTERM)
+            time.sleep(0.002)
+        code = process.wait(timeout=120)
+    finally:
+        process.kill()
+    assert code == cli.EXIT_INTERRUPTED
+    assert "Traceback" not in process.stderr.read().decode()
+    assert_interrupted_outputs(out)
+
+
+def test_a_resume_whose_particles_is_a_file_is_refused_before_writing(tmp_path, capsys, block_file):
+    scene = tmp_path / "series.toml"
+    scene.write_text(BLOCK.replace("every = 5", "every = 5\nparticles = true"))
+    out = killed_checkpoint(tmp_path, scene, capsys)
+    for stale in (out / "particles").iterdir():
+        stale.unlink()
+    (out / "particles").rmdir()
+    (out / "particles").write_text("not a directory")
+    before = snapshot(out)
+    code, _, err = run_cli(["resume", out, "--no-progress"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "particles: is not a directory")
+    assert snapshot(out) == before
+    # and a run into such a directory likewise
+    code, _, err = run_cli(["run", scene, "--out", out, "--no-progress"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, "particles: is not a directory")
+    assert snapshot(out) == before

@@ -1,0 +1,108 @@
+"""First use and ``reproduce``: the note that kernels are compiling, the progress over the
+runs, and wall times taken with the kernels loaded."""
+
+import pytest
+
+from femgrid_mpm.cli.progress import runs_bar
+from femgrid_mpm.kernels import compiled
+from femgrid_mpm.reproduce import PLANNED_RUNS, box_impact, cantilever
+from femgrid_mpm.reproduce import timing
+from femgrid_mpm.scene import bundled_scene
+
+import helpers
+
+
+@pytest.fixture
+def cache_at(monkeypatch):
+    """Point the library's kernel cache at a directory, and forget that the note was given."""
+    def point(directory):
+        monkeypatch.setattr(compiled, "cache_directory", lambda root: directory)
+        compiled.note_compilation.cache_clear()
+    yield point
+    compiled.note_compilation.cache_clear()
+
+
+def test_a_cold_cache_is_announced_once(tmp_path, cache_at, capsys):
+    cache_at(tmp_path)  # empty: nothing compiled yet
+    path = tmp_path / "bar.toml"
+    path.write_text(helpers_scene_text())
+    code, _, err = helpers.run_cli(["info", path], capsys)
+    assert code == 0
+    notes = [line for line in err.splitlines() if line.startswith("femgrid-mpm: note: compiling the numba kernels")]
+    assert len(notes) == 1 and "only once" in notes[0] and str(tmp_path) in notes[0]
+    code, _, err = helpers.run_cli(["info", path], capsys)  # the same process: said once
+    assert "compiling" not in err
+
+
+def test_a_warm_cache_says_nothing(tmp_path, cache_at, capsys):
+    (tmp_path / "kernels").mkdir()
+    (tmp_path / "kernels" / "g2p.local_g2p-59.py311.nbi").write_bytes(b"")
+    cache_at(tmp_path)
+    path = tmp_path / "bar.toml"
+    path.write_text(helpers_scene_text())
+    code, _, err = helpers.run_cli(["info", path], capsys)
+    assert code == 0 and "compiling" not in err
+
+
+def test_no_writable_cache_is_announced_as_compiling_every_time(cache_at):
+    cache_at(None)
+    assert compiled.note_compilation() is True
+
+
+def helpers_scene_text() -> str:
+    from importlib.resources import files
+
+    return (files("femgrid_mpm") / "scenes" / "vibrating_bar.toml").read_text()
+
+
+def test_the_runs_bar_counts_runs_on_a_terminal_only(capsys):
+    assert runs_bar(3, enabled=False) == (None, None)
+    bar, count = runs_bar(3, enabled=True)
+    count("first")
+    count("second")
+    assert bar.n == 2 and bar.total == 3
+    bar.close()
+    err = capsys.readouterr().err
+    assert "2/3 runs" in err and "second" in err
+
+
+def test_each_case_run_is_counted_and_warmed_first(tmp_path, monkeypatch):
+    """The box impact (shortened) makes the runs it plans, each after one warm-up step of
+    its own scene (same basis and contact, a 1e-12 s step)."""
+    monkeypatch.setattr(box_impact, "END", 0.02)
+    warmed, labels = [], []
+    original = timing.warm_kernels
+
+    def spy(scene):
+        warmed.append((scene.grid.basis, scene.contact.kind))
+        original(scene)
+
+    monkeypatch.setattr(timing, "warm_kernels", spy)
+    with timing.following(labels.append):
+        box_impact.run(tmp_path, contacts=("shared",))
+    assert len(labels) == box_impact.planned_runs(("shared",)) == len(box_impact.BASES)
+    assert warmed == [(basis, "shared") for basis in box_impact.BASES]
+    assert labels[0] == f"box impact, {box_impact.BASES[0]} shared"
+
+
+def test_the_planned_runs_of_every_case():
+    assert set(PLANNED_RUNS) == {"vibrating_bar", "cantilever", "box_impact", "cost_accuracy"}
+    assert PLANNED_RUNS["cost_accuracy"]() == 0  # its runs are on the sweep's workers
+    assert PLANNED_RUNS["vibrating_bar"]() == 7
+    bases = len(cantilever.BASES)  # both protocols, the large rotation's three, one resolution per mass
+    assert PLANNED_RUNS["cantilever"]() == 2 * bases + 3 + 2 * bases
+    assert PLANNED_RUNS["cantilever"](resolutions=(0.5, 0.25)) == 2 * bases + 3 + 4 * bases
+
+
+def test_the_warm_up_takes_one_tiny_step(monkeypatch):
+    steps = []
+    original = timing.Simulation.run
+
+    def counting(self, *args, **kwargs):
+        result = original(self, *args, **kwargs)
+        steps.append((self.step_index, self.time))
+        return result
+
+    monkeypatch.setattr(timing.Simulation, "run", counting)
+    timing.warm_kernels(bundled_scene("vibrating_bar"))
+    assert steps == [(1, timing.WARM_STEP)]
