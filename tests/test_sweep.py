@@ -316,3 +316,45 @@ def test_report_of_a_time_step_sweep(tmp_path):
     assert "## Error against the time step" in report and (tmp_path / "time_step.png").is_file()
     assert "| q1 lumped, h = 0.5 m | 0.08, 0.04, 0.02 | 0.09, 0.05, 0.03 |" in report
     assert "## Convergence with the spacing" not in report  # one spacing
+
+
+def test_the_warm_up_copy_reports_none_of_its_warnings():
+    """The two-step copy a worker runs to load the kernels balances its energy over two steps
+    of a ramped load (off by a third of its tiny energy): that warning is the copy's, and the
+    run's own warnings are all a sweep reports."""
+    import warnings
+
+    from femgrid_mpm.scene import bundled_scene
+    from femgrid_mpm.solver import Simulation
+    from femgrid_mpm.sweep.runner import WARM_UP, _warm_up
+
+    scene = bundled_scene("cantilever_quasistatic")
+    with warnings.catch_warnings(record=True) as copied:
+        warnings.simplefilter("always")
+        Simulation(scene.with_overrides(**WARM_UP)).run()
+    assert any("energy balance" in str(w.message) for w in copied)  # the copy itself warns
+    with warnings.catch_warnings(record=True) as reported:
+        warnings.simplefilter("always")
+        _warm_up(scene)
+    assert reported == []
+
+
+def test_a_direct_consistent_solve_has_no_cg_iterations():
+    """``cg_iterations`` is empty for a run that made none (solved directly), not 0."""
+    from femgrid_mpm.sweep.table import row
+
+    class Planned:
+        varied = {"solver.mass": "consistent"}
+        key = "consistent"
+
+        class scene:
+            class grid:
+                basis, spacing = "q1", 0.5
+
+            class solver:
+                mass = "consistent"
+
+    summary = {"status": "completed", "steps": 10, "consistent_mass": {"cg_iterations": 0}}
+    assert row(Planned, summary, 1)["cg_iterations"] == ""
+    summary["consistent_mass"]["cg_iterations"] = 25
+    assert row(Planned, summary, 1)["cg_iterations"] == "2.5"

@@ -135,7 +135,10 @@ def _warm_up(scene) -> None:
     from ..solver import Simulation
 
     try:
-        Simulation(scene.with_overrides(**WARM_UP)).run()
+        # its warnings are the two-step copy's (an energy balance over two steps, say), not the run's
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            Simulation(scene.with_overrides(**WARM_UP)).run()
     except (SimulationStopped, ValueError, ArithmeticError):
         pass  # the run itself reports what is wrong with its scene
 
