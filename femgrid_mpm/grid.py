@@ -51,6 +51,9 @@ class Grid:
         Distance between neighbouring nodes (m), the same for every basis:
         q2 and serendipity elements are ``2 * spacing`` wide, so their nodes
         coincide with q1's nodes (serendipity has no element-centre node).
+    points_per_cell : int
+        Points seeded along each axis of a lattice cell, for a basis whose
+        weights depend on the points' size (``sized``: GIMP); the others ignore it.
 
     Notes
     -----
@@ -75,7 +78,7 @@ class Grid:
         Lattice cells (``spacing`` wide) along x and y.
     """
 
-    def __init__(self, basis: str, lower=(0.0, 0.0), upper=(1.0, 1.0), spacing: float = 1.0):
+    def __init__(self, basis: str, lower=(0.0, 0.0), upper=(1.0, 1.0), spacing: float = 1.0, points_per_cell: int = 2):
         if basis not in BASES:
             raise ValueError(f"unknown basis {basis!r}; choose one of {', '.join(BASES)}")
         builder = BASES[basis]
@@ -103,7 +106,7 @@ class Grid:
         self.spacing = float(spacing)
         self.lower = lower
         self.upper = lower + np.array(n_elements) * width
-        self.discretization: Discretization = builder.build(lower, n_elements, float(spacing))
+        self.discretization: Discretization = builder.build(lower, n_elements, float(spacing), points_per_cell)
         self.cells = (n_elements[0] * builder.cells_per_element, n_elements[1] * builder.cells_per_element)
 
     # -- lattice -------------------------------------------------------------

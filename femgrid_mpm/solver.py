@@ -80,7 +80,8 @@ class Simulation:
     def __init__(self, scene: Scene, observers: list | None = None):
         self.scene = scene = Scene.model_validate(scene)  # a Scene as it is; a dict checked; else a SceneError
         spec = scene.grid
-        self.grid = Grid(spec.basis, spec.lower, spec.upper, spec.spacing)
+        # the points' size, for a basis whose weights depend on it (every body then shares it)
+        self.grid = Grid(spec.basis, spec.lower, spec.upper, spec.spacing, scene.bodies[0].points_per_cell)
         self.materials = [make_material(body.material) for body in scene.bodies]
         self.particles = seed_bodies(scene.bodies, self.materials, spec.spacing)
         self.body_slices = self.particles.body_slices()

@@ -9,7 +9,7 @@ has (see :func:`critical_time_step`), with supports and empty nodes removed.
 
 :func:`critical_time_step` computes it at set-up (once; points that move
 far change it, see the stress suite).  The bases' ``critical_step_factors``
-gives the classic full-grid values in units of element width over p-wave
+gives the classic full-grid values in units of node spacing over p-wave
 speed, for comparison only: near supports and partly filled cells the true
 limit can be far smaller (the cantilever with consistent cubic B-splines:
 a mode with 1e-4 of the lumped mass, unstable at the table's step).  Each basis
@@ -29,11 +29,11 @@ import scipy.sparse.linalg as spla
 
 from .bases import BASES
 
-def bloch_time_step(basis: str, mass: str, element_width: float, wave_speed: float) -> float:
-    """The basis' classic estimate (s) for ``"lumped"`` or ``"consistent"`` mass; 0 if no
-    step is stable."""
+def bloch_time_step(basis: str, mass: str, spacing: float, wave_speed: float) -> float:
+    """The basis' classic estimate (s) for ``"lumped"`` or ``"consistent"`` mass on a grid of
+    node ``spacing`` (m); 0 if no step is stable."""
     factor = BASES[basis].critical_step_factors[mass]
-    return factor * element_width / wave_speed if wave_speed > 0 else math.inf
+    return factor * spacing / wave_speed if wave_speed > 0 else math.inf
 
 
 def stiffness_matrix(dNdx: sp.csr_matrix, dNdy: sp.csr_matrix, volume: np.ndarray, moduli: np.ndarray) -> sp.csr_matrix:

@@ -57,7 +57,7 @@ def test_bloch_table_against_the_estimate_for_q1():
     for mass in ("lumped", "consistent"):
         simulation = Simulation(scene("vibrating_bar", "q1", mass))
         wave_speed = simulation.materials[0].wave_speed
-        steps[mass] = simulation.critical_dt / bloch_time_step("q1", mass, simulation.grid.discretization.element_width, wave_speed)
+        steps[mass] = simulation.critical_dt / bloch_time_step("q1", mass, simulation.grid.spacing, wave_speed)
     assert steps["consistent"] == pytest.approx(1.0, rel=0.1)
     assert steps["lumped"] > 1.3
 

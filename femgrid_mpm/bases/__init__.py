@@ -10,12 +10,14 @@ from this registry.
 """
 
 from .definition import BasisDefinition
-from .bspline3 import BSPLINE3, BSPLINE3_OPEN, ElementBSpline3, TensorSplines, cubic_spline
+from .bspline3 import BSPLINE3, BSPLINE3_OPEN, ElementBSpline3, cubic_spline
 from .finite_element import Q1, Q2, SERENDIPITY, FiniteElementBasis
+from .gimp import GIMP
 from .lattice import Discretization
+from .pieces import TensorPieces
 from .polynomial import LocalPolynomials
 
-BASES = {builder.name: builder for builder in (Q1, Q2, SERENDIPITY, BSPLINE3, BSPLINE3_OPEN)}
+BASES = {builder.name: builder for builder in (Q1, Q2, SERENDIPITY, BSPLINE3, BSPLINE3_OPEN, GIMP)}
 
 __all__ = [
     "BASES",
@@ -25,8 +27,9 @@ __all__ = [
     "Discretization",
     "ElementBSpline3",
     "FiniteElementBasis",
+    "GIMP",
     "LocalPolynomials",
-    "TensorSplines",
+    "TensorPieces",
     "Q1",
     "Q2",
     "SERENDIPITY",

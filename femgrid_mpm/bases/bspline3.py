@@ -25,7 +25,6 @@ from the boundary.  Linear functions are still reproduced exactly.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Mapping
@@ -34,6 +33,7 @@ import numpy as np
 import skfem
 
 from .lattice import Discretization
+from .pieces import TensorPieces
 from .polynomial import LocalPolynomials
 
 
@@ -96,78 +96,6 @@ def greville_abscissae(n_cells: int, knots: str) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class TensorSplines:
-    """Cubic B-spline values on cells: the 1D pieces of each direction, multiplied.
-
-    Attributes
-    ----------
-    tables : (ndarray, ndarray)
-        Per-cell monomial coefficients along x and along y, each shape
-        (n_cells, 4 powers, 4 functions).
-    n_cells_y : int
-        Cells along y, to split an element index ``ix * n_cells_y + iy``.
-    """
-
-    tables: tuple[np.ndarray, np.ndarray]
-    n_cells_y: int
-
-    @property
-    def n_local(self) -> int:
-        return 16
-
-    @functools.cached_property
-    def _interior(self) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
-        """Per direction: the interior piece, and which cells have another one."""
-        result = []
-        for table in self.tables:
-            interior = np.ascontiguousarray(table[len(table) // 2])
-            special = np.any(np.abs(table - interior) > 1e-14, axis=(1, 2))
-            result.append((interior, special))
-        return tuple(result)
-
-    def evaluate(self, cell_points: np.ndarray, element: np.ndarray):
-        """Values and cell-coordinate derivatives, each shape (n, 16), function ``4 a + b``."""
-        ix, iy = np.divmod(element, self.n_cells_y)
-        fx, dfx = self._one_direction(0, ix, cell_points[:, 0])
-        fy, dfy = self._one_direction(1, iy, cell_points[:, 1])
-        n = len(cell_points)
-        values = (fx[:, :, None] * fy[:, None, :]).reshape(n, 16)
-        d_xi = (dfx[:, :, None] * fy[:, None, :]).reshape(n, 16)
-        d_eta = (fx[:, :, None] * dfy[:, None, :]).reshape(n, 16)
-        return values, d_xi, d_eta
-
-    def _one_direction(self, axis: int, cell: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """1D values and derivatives of the four functions of each point's cell.
-
-        All points get the interior piece by one matrix product; only points
-        in cells with another piece (next to an open boundary) are redone.
-        """
-        interior, special = self._interior[axis]
-        powers = np.empty((len(s), 4))
-        slopes = np.empty((len(s), 4))
-        powers[:, 0] = 1.0
-        powers[:, 1] = s
-        np.multiply(s, s, out=powers[:, 2])
-        np.multiply(powers[:, 2], s, out=powers[:, 3])
-        slopes[:, 0] = 0.0
-        slopes[:, 1] = 1.0
-        np.multiply(s, 2.0, out=slopes[:, 2])
-        np.multiply(powers[:, 2], 3.0, out=slopes[:, 3])
-        values = powers @ interior
-        derivatives = slopes @ interior
-        special_cells = np.flatnonzero(special)
-        if len(special_cells):
-            # special cells are the first and last three: two cheap comparisons find their points
-            n_cells = len(special)
-            rows = np.flatnonzero((cell < 3) | (cell >= n_cells - 3))
-            for special_cell in special_cells:  # at most six per direction
-                sub = rows[cell[rows] == special_cell]
-                values[sub] = powers[sub] @ self.tables[axis][special_cell]
-                derivatives[sub] = slopes[sub] @ self.tables[axis][special_cell]
-        return values, derivatives
-
-
-@dataclass(frozen=True)
 class BSpline3Basis:
     """Cubic B-splines on the lattice; ``knots`` is ``"ghost"`` (the paper's) or ``"open"``."""
 
@@ -182,13 +110,16 @@ class BSpline3Basis:
     #: uniform splines in the interior: the Gram matrix is a tensor product there
     tensor_gram: bool = True
     mass_threshold: bool = True
+    sized: bool = False
 
-    def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float) -> Discretization:
+    def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float,
+              points_per_cell: int = 2) -> Discretization:
         element = ElementBSpline3()
         nx, ny = n_elements[0] + 3, n_elements[1] + 3  # functions per direction
         positions = [greville_abscissae(n, self.knots) for n in n_elements]
         gx, gy = np.meshgrid(lower[0] + spacing * positions[0], lower[1] + spacing * positions[1], indexing="ij")
         nodes = np.column_stack([gx.ravel(), gy.ravel()])  # node (i, j) has index i * ny + j
+        ix_nodes, iy_nodes = np.meshgrid(np.arange(nx) - 1, np.arange(ny) - 1, indexing="ij")
         ix, iy = np.meshgrid(np.arange(n_elements[0]), np.arange(n_elements[1]), indexing="ij")
         # cell (ix, iy) carries functions ix .. ix + 3 along x and iy .. iy + 3 along y
         offsets = element.node_offsets + 1
@@ -197,7 +128,7 @@ class BSpline3Basis:
             # every cell alike: the monomial form of the paper's element is fastest
             local_basis = LocalPolynomials.from_lbasis(element.lbasis, 16, self.degree, np.eye(2), np.zeros(2))
         else:
-            local_basis = TensorSplines(tuple(open_knot_tables(n) for n in n_elements), n_elements[1])
+            local_basis = TensorPieces(tuple(open_knot_tables(n) for n in n_elements), n_elements[1])
         x = lower[0] + spacing * np.arange(n_elements[0] + 1)
         y = lower[1] + spacing * np.arange(n_elements[1] + 1)
         return Discretization(
@@ -212,6 +143,9 @@ class BSpline3Basis:
             mesh=skfem.MeshQuad.init_tensor(x, y),
             element=element,
             nonnegative=self.nonnegative,
+            # function (i, j) sits at lattice position (i - 1, j - 1), its Greville point rounded
+            # (open knots move two nodes per direction off the lattice, a third of a spacing in)
+            node_lattice=np.column_stack([ix_nodes.ravel(), iy_nodes.ravel()]),
         )
 
 

@@ -34,7 +34,7 @@ class BasisDefinition(Protocol):
     nonnegative : bool
         Every function is >= 0, so row-sum masses cannot be negative.
     critical_step_factors : mapping of str to float
-        ``dt_crit * c_p / element_width`` on a full, unsupported grid for
+        ``dt_crit * c_p / spacing`` on a full, unsupported grid for
         ``"lumped"`` and ``"consistent"`` mass (the classic Bloch values, for
         comparison with :func:`femgrid_mpm.stability.critical_time_step`).
     tensor_gram : bool
@@ -46,6 +46,12 @@ class BasisDefinition(Protocol):
         threshold (``negative_mass = "threshold"``) has a full share to be a
         fraction of (serendipity's corner functions integrate to -1/12 of an
         element: it has none).
+    sized : bool
+        The weights depend on the size of the points (GIMP: the functions
+        averaged over a point's domain, a square of its initial spacing
+        ``spacing / points_per_cell``): ``build`` lays the basis for the
+        scene's ``points_per_cell``, which every body must then share.  The
+        other bases ignore it.
     """
 
     name: str
@@ -56,6 +62,11 @@ class BasisDefinition(Protocol):
     critical_step_factors: Mapping[str, float]
     tensor_gram: bool
     mass_threshold: bool
+    sized: bool
 
-    def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float) -> Discretization:
-        """The basis laid on ``n_elements`` elements from ``lower``, nodes ``spacing`` apart."""
+    def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float,
+              points_per_cell: int = 2) -> Discretization:
+        """The basis laid on ``n_elements`` elements (``cells_per_element`` lattice cells
+        wide) from ``lower``, nodes ``spacing`` apart, for points seeded
+        ``points_per_cell`` to a cell along each axis.  Its ``Discretization`` may
+        cut the elements finer (its ``element_width``): the pieces of its functions."""

@@ -59,13 +59,15 @@ class FiniteElementBasis:
     mass_threshold: bool = True
     #: scikit-fem's elements are Lagrange or serendipity polynomials, not splines
     tensor_gram: bool = False
+    sized: bool = False
 
     @property
     def support_width(self) -> int:
         """A vertex function spans the two elements beside its node."""
         return 2 * self.cells_per_element
 
-    def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float) -> Discretization:
+    def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float,
+              points_per_cell: int = 2) -> Discretization:
         width = spacing * self.cells_per_element
         x = lower[0] + width * np.arange(n_elements[0] + 1)
         y = lower[1] + width * np.arange(n_elements[1] + 1)
@@ -158,11 +160,11 @@ def _snap_to_lattice(points: np.ndarray, lower: np.ndarray, spacing: float) -> n
 Q1 = FiniteElementBasis("q1", skfem.ElementQuad1, degree=1, cells_per_element=1, nonnegative=True,
                         critical_step_factors=MappingProxyType({"lumped": 1.0, "consistent": 0.5}))
 Q2 = FiniteElementBasis("q2", skfem.ElementQuad2, degree=2, cells_per_element=2, nonnegative=False,
-                        critical_step_factors=MappingProxyType({"lumped": 0.4, "consistent": 0.2}))
+                        critical_step_factors=MappingProxyType({"lumped": 0.8, "consistent": 0.4}))
 # serendipity's corner functions integrate to -1/12 of an element: row-sum masses there are
 # negative wherever a body fills the element, so no lumped step is stable and no full share
 # exists for the mass threshold
 SERENDIPITY = FiniteElementBasis(
     "serendipity", skfem.ElementQuadS2, degree=2, cells_per_element=2, nonnegative=False,
-    critical_step_factors=MappingProxyType({"lumped": 0.0, "consistent": 0.2}), mass_threshold=False,
+    critical_step_factors=MappingProxyType({"lumped": 0.0, "consistent": 0.4}), mass_threshold=False,
 )

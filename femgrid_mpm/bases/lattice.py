@@ -31,7 +31,7 @@ class Discretization:
         the lattice: by x index, then by y index.
     connectivity : ndarray, shape (n_elements_x * n_elements_y, n_local), int32
         Node indices of the local functions of element ``ix * n_elements_y + iy``.
-    local_basis : LocalPolynomials or TensorSplines
+    local_basis : LocalPolynomials or TensorPieces
         Local functions in cell coordinates (xi along x, eta along y):
         ``local_basis.evaluate(cell_points, element) -> (phi, dphi_dxi,
         dphi_deta)``, each (n, n_local).
@@ -45,6 +45,10 @@ class Discretization:
     dofs : ndarray of int64, shape (n_nodes,), or None
         scikit-fem's number of each node's degree of freedom in ``mesh``'s
         basis (None for bases that scikit-fem does not define).
+    node_lattice : ndarray of int64, shape (n_nodes, 2), or None
+        Each node's position on the lattice in spacings from ``lower``, where
+        rounding its coordinates would not give it (open-knot splines); None:
+        ``rint((nodes - lower) / spacing)``.
     """
 
     basis: str
@@ -59,3 +63,4 @@ class Discretization:
     element: Any
     nonnegative: bool
     dofs: Any = None
+    node_lattice: Any = None

@@ -17,8 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..bases import TensorSplines
-
 
 @dataclass
 class MassPattern:
@@ -82,10 +80,8 @@ def lattice_coordinates(grid) -> np.ndarray:
     to their Greville abscissae, so there the function index is used.
     """
     d = grid.discretization
-    if isinstance(d.local_basis, TensorSplines):
-        n_y = d.n_elements[1] + 3
-        index = np.arange(grid.n_nodes)
-        return np.column_stack([index // n_y - 1, index % n_y - 1])
+    if d.node_lattice is not None:
+        return np.asarray(d.node_lattice, dtype=np.int64)
     return np.rint((grid.nodes - grid.lower) / grid.spacing).astype(np.int64)
 
 

@@ -7,7 +7,7 @@ the tensor-product bases (q1, q2, cubic B-splines), two for the corner
 functions of serendipity.  :func:`separated_tables` derives that form once per
 grid from the basis's own definition (the monomial coefficients that
 :class:`~femgrid_mpm.bases.LocalPolynomials` fits to scikit-fem's ``lbasis``,
-or the per-cell tables of :class:`~femgrid_mpm.bases.TensorSplines`) by exact
+or the per-cell tables of :class:`~femgrid_mpm.bases.TensorPieces`) by exact
 skeleton (cross) decomposition, and checks it reproduces them.  Evaluating a
 point (:mod:`.shape`, inside the kernels) is then a few 1D Horner evaluations
 and ``3 x n_terms`` products, the same numbers as
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..bases import LocalPolynomials, TensorSplines
+from ..bases import LocalPolynomials, TensorPieces
 
 
 @dataclass(frozen=True)
@@ -192,16 +192,17 @@ def separated_tables(grid) -> BasisTables:
     geometry = np.array([*grid.lower, *grid.upper, 1.0 / d.element_width])
     n_elements = np.array(d.n_elements, dtype=np.int64)
     connectivity = np.ascontiguousarray(d.connectivity, dtype=np.int32)
-    if isinstance(local, TensorSplines):
-        # per-cell tables (cell, power, function); function k = 4 a + b is X_a(xi) Y_b(eta)
+    if isinstance(local, TensorPieces):
+        # per-cell tables (cell, power, function); function k = n1 a + b is X_a(xi) Y_b(eta)
+        n1 = local.n1
         factors_x = np.ascontiguousarray(np.swapaxes(local.tables[0], 1, 2))
         factors_y = np.ascontiguousarray(np.swapaxes(local.tables[1], 1, 2))
         table_x = np.arange(d.n_elements[0], dtype=np.int32)
         table_y = np.arange(d.n_elements[1], dtype=np.int32)
-        terms = np.array([(4 * a + b, a, b) for a in range(4) for b in range(4)], dtype=np.int32)
+        terms = np.array([(n1 * a + b, a, b) for a in range(n1) for b in range(n1)], dtype=np.int32)
         weights = np.ones(len(terms))
         # flat form: the tensor products themselves
-        flat = (factors_x, factors_y, np.arange(16, dtype=np.int32)[:, None], np.ones((16, 1)))
+        flat = (factors_x, factors_y, np.arange(n1 * n1, dtype=np.int32)[:, None], np.ones((n1 * n1, 1)))
     elif isinstance(local, LocalPolynomials):
         us, ws, separated = _skeleton_terms(local)
         factors_x, factors_y = np.array(us)[None], np.array(ws)[None]
@@ -217,28 +218,34 @@ def separated_tables(grid) -> BasisTables:
         fx, fy, order = tensor
         tensor_connectivity = np.ascontiguousarray(connectivity[:, order])
         linear = all(f.shape[1:] == LINEAR_FACTORS.shape and np.all(f == LINEAR_FACTORS) for f in (fx, fy))
-        tensor = TensorTables(LINEAR if linear else (0,) * fx.shape[1], geometry, n_elements, fx, table_x, fy, table_y,
-                              _uniform_runs(fx, table_x, fy, table_y), connectivity=tensor_connectivity, order=order,
-                              numbering=lattice_numbering(tensor_connectivity, d.n_elements, fx.shape[1]))
+        numbering = lattice_numbering(tensor_connectivity, d.n_elements, fx.shape[1])
+        # nodes that are no affine function of the cell (pieces finer than the node lattice,
+        # as GIMP's): the flat form, which reads them
+        tensor = None if numbering is None else TensorTables(
+            LINEAR if linear else (0,) * fx.shape[1], geometry, n_elements, fx, table_x, fy, table_y,
+            _uniform_runs(fx, table_x, fy, table_y), connectivity=tensor_connectivity, order=order,
+            numbering=numbering)
     factors_x, factors_y, terms, weights = flat
     uniform = _uniform_runs(factors_x, table_x, factors_y, table_y)
     folded = None if tensor is not None else _folded_form(factors_x, factors_y, terms, weights, connectivity)
     if folded is not None:
         fold, folded_connectivity, order = folded
         n1 = factors_x.shape[1]
-        folded = FoldedTables((0,) * n1, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform,
-                              fold=fold, connectivity=folded_connectivity, order=order,
-                              numbering=lattice_numbering(folded_connectivity, d.n_elements, n1, skip=(n1 * n1) // 2))
+        numbering = lattice_numbering(folded_connectivity, d.n_elements, n1, skip=(n1 * n1) // 2)
+        folded = None if numbering is None else FoldedTables(
+            (0,) * n1, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform, fold=fold,
+            connectivity=folded_connectivity, order=order, numbering=numbering)
     return BasisTables((0,) * factors_x.shape[1], geometry, n_elements, factors_x, table_x, factors_y, table_y,
                        uniform, terms=terms, term_weights=weights, connectivity=connectivity, tensor=tensor,
                        folded=folded)
 
 
-def lattice_numbering(connectivity: np.ndarray, n_elements, n1: int, skip: int = -1) -> tuple:
+def lattice_numbering(connectivity: np.ndarray, n_elements, n1: int, skip: int = -1) -> tuple | None:
     """The node of slot ``s = i n1 + j`` of element ``(ix, iy)`` as an affine function,
     ``ix * step_x + iy * steps_y[i] + offsets[s]``: the flat tuple
     ``(step_x, *steps_y, *offsets)``, ``steps_y`` a single step if every column
-    has the same (so the tuple's length tells which).
+    has the same (so the tuple's length tells which); None if the nodes are no
+    affine function of the element (elements finer than the node lattice).
 
     The grid numbers its nodes along the lattice (x index, then y index), so
     moving one element along x adds the same number to every node, and
@@ -264,7 +271,7 @@ def lattice_numbering(connectivity: np.ndarray, n_elements, n1: int, skip: int =
     if skip >= 0:
         used[skip] = False  # its node (one of the element's) is never read
     if not np.array_equal(affine.reshape(n_x, n_y, -1)[..., used], nodes.reshape(n_x, n_y, -1)[..., used]):
-        raise AssertionError("the grid's nodes are not numbered along the lattice")
+        return None
     # one step for all columns when they share it (every basis but serendipity): one product per point
     steps = steps_y[:1] if len(set(steps_y)) == 1 else steps_y
     return (step_x, *steps, *(int(o) for o in offsets))  # flat: numba passes no nested tuple into a prange body

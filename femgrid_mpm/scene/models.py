@@ -288,6 +288,11 @@ class Scene(_Model):
                 )
             if self.contact is not None and self.contact.kind == "frictional":
                 raise ValueError("solver.negative_mass: 'threshold' is implemented for one shared field, not for 'frictional' contact")
+        sizes = sorted({body.points_per_cell for body in self.bodies})
+        if BASES[self.grid.basis].sized and len(sizes) > 1:
+            # the weights are laid out for one point size (the points' initial spacing)
+            raise ValueError(f"bodies: {self.grid.basis} weighs every point as a square of one size, spacing / "
+                             f"points_per_cell: give every body the same points_per_cell (got {sizes})")
         return self
 
     @classmethod

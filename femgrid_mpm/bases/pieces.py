@@ -1,0 +1,105 @@
+"""Tensor products of 1D polynomial pieces that differ from cell to cell.
+
+Some bases are not one polynomial on every cell: open-knot splines change
+their pieces in the cells next to a boundary, and a basis whose pieces are
+finer than the node lattice (GIMP: the hat functions averaged over a point's
+width) repeats a few different pieces along each direction.  Such a basis
+gives, per direction, one table of monomial coefficients per cell, and a
+point's ``n1 x n1`` functions are the products of the ``n1`` functions of its
+cell along x and along y.  The compiled kernels read the same tables
+(:func:`femgrid_mpm.kernels.tables.separated_tables`).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TensorPieces:
+    """Per-cell 1D pieces, multiplied.
+
+    Attributes
+    ----------
+    tables : (ndarray, ndarray)
+        Per-cell monomial coefficients along x and along y, each shape
+        (n_cells, n1 powers, n1 functions): the cell's function ``a`` is
+        ``sum_k tables[cell, k, a] s**k`` in the cell coordinate ``s``.
+    n_cells_y : int
+        Cells along y, to split an element index ``ix * n_cells_y + iy``.
+    """
+
+    tables: tuple[np.ndarray, np.ndarray]
+    n_cells_y: int
+
+    @property
+    def n1(self) -> int:
+        """Functions per direction on a cell (4 for cubic splines, 3 for GIMP)."""
+        return self.tables[0].shape[2]
+
+    @property
+    def n_local(self) -> int:
+        return self.n1 * self.n1
+
+    @functools.cached_property
+    def _pieces(self) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]:
+        """Per direction: the middle cell's piece (the interior's, for open knots), the other
+        distinct pieces, and which of those each cell has (-1: the middle cell's).
+
+        Cells whose coefficients are within 1e-14 of the middle cell's take its piece: the
+        fitted tables of equal pieces differ in the last bits from cell to cell.
+        """
+        result = []
+        for table in self.tables:
+            common = np.ascontiguousarray(table[len(table) // 2])
+            special = np.flatnonzero(np.any(np.abs(table - common) > 1e-14, axis=(1, 2)))
+            index = np.full(len(table), -1, dtype=np.int64)
+            others = np.empty((0, *common.shape))
+            if len(special):
+                others, which = np.unique(table[special].reshape(len(special), -1), axis=0, return_inverse=True)
+                others = others.reshape(-1, *common.shape)
+                index[special] = which.reshape(-1)
+            result.append((common, others, index))
+        return tuple(result)
+
+    def evaluate(self, cell_points: np.ndarray, element: np.ndarray):
+        """Values and cell-coordinate derivatives, each shape (n, n1 * n1), function ``n1 a + b``."""
+        ix, iy = np.divmod(element, self.n_cells_y)
+        fx, dfx = self._one_direction(0, ix, cell_points[:, 0])
+        fy, dfy = self._one_direction(1, iy, cell_points[:, 1])
+        n, n_local = len(cell_points), self.n_local
+        values = (fx[:, :, None] * fy[:, None, :]).reshape(n, n_local)
+        d_xi = (dfx[:, :, None] * fy[:, None, :]).reshape(n, n_local)
+        d_eta = (fx[:, :, None] * dfy[:, None, :]).reshape(n, n_local)
+        return values, d_xi, d_eta
+
+    def _one_direction(self, axis: int, cell: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """1D values and derivatives of the ``n1`` functions of each point's cell.
+
+        All points get the most common piece by one matrix product; only the
+        points in cells with another piece are redone, piece by piece.
+        """
+        common, others, index = self._pieces[axis]
+        n1 = self.n1
+        powers = np.empty((len(s), n1))
+        slopes = np.empty((len(s), n1))
+        powers[:, 0] = 1.0
+        slopes[:, 0] = 0.0
+        powers[:, 1] = s
+        slopes[:, 1] = 1.0
+        for k in range(2, n1):
+            np.multiply(powers[:, k - 1], s, out=powers[:, k])
+            np.multiply(powers[:, k - 1], float(k), out=slopes[:, k])
+        values = powers @ common
+        derivatives = slopes @ common
+        if len(others):
+            piece = index[cell]
+            rows = np.flatnonzero(piece >= 0)
+            for position in np.unique(piece[rows]):
+                sub = rows[piece[rows] == position]
+                values[sub] = powers[sub] @ others[position]
+                derivatives[sub] = slopes[sub] @ others[position]
+        return values, derivatives
