@@ -71,14 +71,31 @@ def legend_outside(axes, **kwargs) -> None:
     axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kwargs)
 
 
-def stop_label(label: str, status: str, end_time: float) -> str:
-    """A series' legend entry; a stopped run says when it stopped."""
-    return label if status == "completed" else f"{label} (stopped at t = {end_time:.2f} s)"
+def stop_reason(message: str, time: float) -> str:
+    """A stop in a few words: ``step 44 (t = 0.22 s): the energy ran away: ...`` at 0.22 gives
+    ``the energy ran away at t = 0.22 s``."""
+    parts = message.split(": ")
+    return f"{parts[1] if len(parts) > 1 else message} at t = {time:.2f} s"
 
 
 def mark_stop(axes, time: float, value: float, color, label: str | None = None) -> None:
     """A cross where a stopped run's series ends."""
     axes.plot([time], [value], color=color, label=label, **STOP_MARKER)
+
+
+#: a stopped run's records are drawn while its total energy stays within this fraction above
+#: its initial energy plus the work put in: the runs that complete rise by 4.1% at most
+ENERGY_CREATED = 0.10
+
+
+def valid_records(energy: dict) -> int:
+    """How many leading records of a stopped run to draw: those before its total energy first
+    exceeds ``(1 + ENERGY_CREATED) (initial + work put in)``, the records before the run
+    created energy (the runaway guard's bound, with 10% in place of 10x)."""
+    total = np.asarray(energy["total"])
+    bound = (1 + ENERGY_CREATED) * (total[0] + np.maximum(np.asarray(energy["external_work"]), 0.0))
+    created = np.flatnonzero(total > bound)
+    return int(created[0]) if created.size else len(total)
 
 
 @styled
@@ -88,7 +105,8 @@ def energy_figure(energy: dict, title: str, path, stopped: str | None = None) ->
     The paper draws energies and errors on one axis; the errors are two
     orders smaller, so they get a second panel of their own here.  A run that
     stopped (``stopped`` is its reason) gets a cross on each curve where it
-    stopped and the reason in the title.
+    stopped and the reason in the title, and a line where it began to create
+    energy (:func:`valid_records`).
     """
     figure, (top, bottom) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, height_ratios=(3, 2))
     time = energy["time"]
@@ -98,12 +116,16 @@ def energy_figure(energy: dict, title: str, path, stopped: str | None = None) ->
             if stopped is not None:
                 mark_stop(axes, time[-1], energy[key][-1], color)
         if stopped is not None:
-            axes.plot([], [], color="0.3", label=f"stopped at t = {time[-1]:.2f} s", **STOP_MARKER)
+            axes.plot([], [], color="0.3", label="last record before the stop", **STOP_MARKER)
+            valid = valid_records(energy)
+            if valid < len(time):
+                axes.axvline(time[valid], color="0.4", linestyle="--", linewidth=1,
+                             label=f"energy created from t = {time[valid]:.2f} s")
         legend_outside(axes)
     top.set_ylabel(f"energy ({ENERGY_UNIT})")
     bottom.set_ylabel(f"error ({ENERGY_UNIT})")
     bottom.set_xlabel("time (s)")
-    top.set_title(title if stopped is None else f"{title}\nstopped: {stopped}")
+    top.set_title(title if stopped is None else f"{title}\n(stopped: {stopped})")
     figure.tight_layout()
     save(figure, path)
 

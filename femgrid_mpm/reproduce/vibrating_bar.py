@@ -15,7 +15,7 @@ import numpy as np
 
 from ..analysis import bar_axial_period_1d, bar_axial_period_2d, modal_velocity_probe, zero_crossing_period
 from ..scene import bundled_scene
-from .plotting import ENERGY_UNIT, energy_figure, energy_overlay_figure, legend_outside, markdown_table, save, styled
+from .plotting import ENERGY_UNIT, energy_figure, energy_overlay_figure, legend_outside, markdown_table, save, stop_reason, styled
 from .timing import timed_run
 
 RUNS = [
@@ -83,7 +83,7 @@ def run(out_dir) -> dict:
         if mass == "lumped":
             number = PAPER_FIGURE[basis]
             energy_figure(energy, f"Fig. {number}: vibrating bar, {NAMES[basis]}, lumped mass", out / f"fig{number:02d}_energy_{basis}.png",
-                          stopped=None if result.status == "completed" else result.message)
+                          stopped=None if result.status == "completed" else stop_reason(result.message, result.summary["time"]))
     pairs = {f"{NAMES[basis]}": (runs[(basis, "lumped")], runs[(basis, "consistent")]) for basis, mass in RUNS if mass == "consistent"}
     energy_overlay_figure(pairs, "Vibrating bar: lumped (solid) against consistent (dashed) mass", out / OVERLAY_FIGURE)
     _figure_interpolation_error(runs, out / "fig08_interpolation_error.png")
