@@ -5,8 +5,9 @@ shared velocity field, and (where the scene supports it) with frictional
 multi-field contact, and writes:
 
 * Figs. 14-16: energy measures per basis (shared field, as the paper);
-* Fig. 17: the box's mean height against time per basis, and the final
-  configurations, shared and frictional side by side;
+* Fig. 17: the box's mean height and the beam's mid-span against time per
+  basis, and the final configurations, shared and frictional side by side; a
+  run that stopped is drawn up to where it created energy and crossed there;
 * a table: box rebound speed, final beam deflection at mid-span, energy
   error, negative-mass events, wall time.
 """
@@ -22,7 +23,7 @@ import numpy as np
 
 from ..analysis import Probe
 from ..scene import Scene, bundled_scene
-from .plotting import energy_figure, markdown_table
+from .plotting import STOP_MARKER, energy_figure, markdown_table, save, stop_reason, styled, valid_records
 from .timing import timed_run
 
 BASES = ["q1", "serendipity", "q2", "bspline3", "bspline3_open"]
@@ -35,6 +36,7 @@ NAMES = {
     "bspline3_open": "cubic splines, open knots",
 }
 BEAM, BOX = 0, 1
+COLOURS = {"q1": "tab:blue", "serendipity": "tab:orange", "q2": "tab:green", "bspline3": "tab:red", "bspline3_open": "tab:purple"}
 
 
 @dataclass
@@ -120,32 +122,10 @@ def run(out_dir, contacts=("shared", "frictional")) -> dict:
             title, name = f"Fig. {number}: box impact, {NAMES[basis]}, shared field", f"fig{number}_energy_{basis}.png"
         else:
             title, name = f"Box impact, {NAMES[basis]}, {contact} contact", f"energy_{basis}_{contact}.png"
-        energy_figure(run_.energy, title, out / name)
-
-    figure, axes = plt.subplots(4, len(contacts), figsize=(6 * len(contacts), 15), squeeze=False)
-    for column, contact in enumerate(contacts):
-        for row, (key, label) in enumerate((("box_height", "mean height of the box (m)"), ("mid_span", "beam deflection at mid-span (m)"))):
-            ax = axes[row, column]
-            for basis in BASES:
-                run_ = runs[(basis, contact)]
-                ax.plot(run_.times, getattr(run_, key), label=NAMES[basis] + ("" if run_.status == "completed" else " (stopped)"))
-            ax.axvline(3.0, color="0.6", linestyle=":", linewidth=1)
-            ax.set_title(("Fig. 17: box height" if row == 0 else "beam at mid-span") + f", {contact} contact (paper's run ends at the dotted line)", fontsize=9)
-            ax.set_xlabel("Time (s)")
-            ax.set_ylabel(label)
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=7)
-        for row, basis in enumerate(("q1", "bspline3"), start=2):
-            ax = axes[row, column]
-            p = runs[(basis, contact)].particles
-            ax.scatter(p.x[:, 0], p.x[:, 1], s=2, c=np.where(p.body == BOX, "tab:red", "tab:blue"))
-            ax.set_title(f"final configuration (t = {runs[(basis, contact)].times[-1]:.1f} s), {NAMES[basis]}, {contact}", fontsize=9)
-            ax.set_aspect("equal")
-            ax.set_xlim(0, 10)
-            ax.set_ylim(2, 10)
-    figure.tight_layout()
-    figure.savefig(out / "fig17_box_height.png", dpi=100)
-    plt.close(figure)
+        reason = None if run_.status == "completed" else stop_reason(run_.message, run_.summary["time"])
+        energy_figure(run_.energy, title, out / name, stopped=reason)
+    _figure_history(runs, contacts, out / "fig17_box_height.png")
+    _figure_final(runs, contacts, out / "fig17_final_configuration.png")
 
     rows, report = [], {}
     for (basis, contact), run_ in runs.items():
@@ -180,6 +160,73 @@ def run(out_dir, contacts=("shared", "frictional")) -> dict:
     (out / "table.md").write_text(text)
     (out / "results.json").write_text(json.dumps(report, indent=2, default=float))
     return report
+
+
+def _drawn(run_: ImpactRun) -> tuple[int, str]:
+    """How many records of a run to draw, and its legend entry: a stopped run up to where it
+    created energy (:func:`valid_records`), with when that was and when it stopped."""
+    label = NAMES[run_.basis]
+    if run_.status == "completed":
+        return len(run_.times), label
+    count = max(1, min(valid_records(run_.energy), len(run_.times)))
+    stop = f"stopped at t = {run_.summary['time']:.2f} s"
+    if count < len(run_.times):
+        return count, f"{label} ({stop}; energy created from t = {run_.times[count]:.2f} s, not drawn)"
+    return count, f"{label} ({stop})"
+
+
+@styled
+def _figure_history(runs: dict, contacts, path: Path) -> None:
+    """Paper Fig. 17: the box's mean height and the beam's mid-span against time."""
+    figure, axes = plt.subplots(2, len(contacts), figsize=(6.5 * len(contacts), 7.5), sharex=True, sharey="row", squeeze=False)
+    quantities = (("box_height", "mean height of the box (m)"), ("mid_span", "beam deflection at mid-span (m)"))
+    for column, contact in enumerate(contacts):
+        for row, (key, label) in enumerate(quantities):
+            ax = axes[row, column]
+            for basis in BASES:
+                run_ = runs[(basis, contact)]
+                count, entry = _drawn(run_)
+                values = getattr(run_, key)[:count]
+                ax.plot(run_.times[:count], values, color=COLOURS[basis], label=entry)
+                if run_.status != "completed":
+                    ax.plot(run_.times[count - 1], values[-1], color=COLOURS[basis], **STOP_MARKER)
+            ax.axvline(3.0, color="0.5", linestyle=":", linewidth=1.2, label="the paper's run ends (t = 3 s)")
+            if any(runs[(basis, contact)].status != "completed" for basis in BASES):
+                ax.plot([], [], color="0.5", label="last record drawn of a stopped run", **STOP_MARKER)
+            ax.set_title(("Fig. 17: box height" if row == 0 else "beam at mid-span") + f", {contact} contact")
+            ax.set_ylabel(label)
+        axes[-1, column].set_xlabel("time (s)")
+        # one legend per column, under it: the entries say which runs stopped (x) and when
+        axes[-1, column].legend(loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=1)
+    figure.tight_layout()
+    save(figure, path)
+
+
+@styled
+def _figure_final(runs: dict, contacts, path: Path) -> None:
+    """Paper Fig. 17's final configurations: the points of q1 and cubic splines at the end."""
+    shown = ("q1", "bspline3")
+    figure, axes = plt.subplots(len(shown), len(contacts), figsize=(5.5 * len(contacts), 4.6 * len(shown)),
+                                sharex=True, sharey=True, squeeze=False)
+    for column, contact in enumerate(contacts):
+        for row, basis in enumerate(shown):
+            ax = axes[row, column]
+            run_ = runs[(basis, contact)]
+            p = run_.particles
+            for body, colour, name in ((BEAM, "tab:blue", "beam"), (BOX, "tab:red", "box")):
+                members = p.body == body
+                ax.scatter(p.x[members, 0], p.x[members, 1], s=3, c=colour, label=name)
+            state = "end" if run_.status == "completed" else "stopped"
+            ax.set_title(f"{NAMES[basis]}, {contact}: {state} at t = {run_.summary['time']:.1f} s")
+            ax.set_aspect("equal")
+            ax.set_xlim(0, 10)
+            ax.set_ylim(2, 10)
+            ax.set_xlabel("x (m)")
+            ax.set_ylabel("y (m)")
+    axes[0, -1].legend(loc="upper right", markerscale=4)
+    figure.suptitle("Fig. 17: final configurations (grid 10 x 10 m)")
+    figure.tight_layout()
+    save(figure, path)
 
 
 if __name__ == "__main__":  # pragma: no cover

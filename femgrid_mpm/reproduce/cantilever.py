@@ -31,7 +31,7 @@ from .. import beam_theory
 from ..effects import Stage
 from ..scene import bundled_scene
 from ..solver import Simulation
-from .plotting import markdown_table
+from .plotting import legend_outside, markdown_table, save, shared_limits, styled
 from .timing import timed_run
 
 LENGTH, HEIGHT, E, NU = 8.0, 1.0, 3.0e5, 0.0
@@ -215,27 +215,34 @@ def run(out_dir, resolutions=PAPER_RESOLUTION) -> dict:
     return report
 
 
+@styled
 def _figure_stress(runs: dict, path: Path) -> None:
-    """Paper Fig. 10: horizontal normal stress at the points at the end of the run."""
-    figure, axes = plt.subplots(len(runs), 1, figsize=(7, 2.0 * len(runs)), sharex=True)
+    """Paper Fig. 10: horizontal normal stress at the points at the end of the run.
+
+    One colour scale, symmetric about zero, for every panel, so that the bases
+    can be compared colour for colour."""
+    low, high = shared_limits(*(run_.particles.stress[:, 0] for run_ in runs.values()))
+    bound = max(abs(low), abs(high))
+    figure, axes = plt.subplots(len(runs), 1, figsize=(8, 1.6 * len(runs) + 0.8), sharex=True, layout="constrained")
     for ax, (basis, run_) in zip(axes, runs.items()):
         p = run_.particles
-        image = ax.scatter(p.x[:, 0], p.x[:, 1], c=p.stress[:, 0], s=12, cmap="coolwarm")
-        figure.colorbar(image, ax=ax, label="sigma_xx (Pa)")
-        ax.set_title(LABELS[basis] + ("" if run_.status == "completed" else " - stopped"), fontsize=9)
+        image = ax.scatter(p.x[:, 0], p.x[:, 1], c=p.stress[:, 0], s=14, cmap="coolwarm", vmin=-bound, vmax=bound)
+        ax.set_title(LABELS[basis] + ("" if run_.status == "completed" else f" - stopped at t = {run_.end_time:.2f} s"))
         ax.set_aspect("equal")
-        ax.set_ylim(0.5, 2.5)
+        ax.set_ylim(0.75, 2.25)
+        ax.set_ylabel("y (m)")
+        ax.grid(False)
     axes[-1].set_xlabel("x (m)")
+    figure.colorbar(image, ax=axes, label=r"$\sigma_{xx}$ (Pa)", shrink=0.6)
     figure.suptitle("Fig. 10: horizontal normal stress, paper's protocol, t = 20 s")
-    figure.tight_layout()
-    figure.savefig(path, dpi=120)
-    plt.close(figure)
+    save(figure, path)
 
 
+@styled
 def _figure_deflection(paper: dict, quasi: dict, path: Path) -> None:
     """Paper Fig. 11: neutral-axis deflection per basis against the analytical solution."""
-    figure, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=False)
-    for ax, runs, title in ((axes[0], paper, "paper's protocol (t = 20 s)"), (axes[1], quasi, "quasi-static protocol")):
+    figure, axes = plt.subplots(1, 2, figsize=(12, 4.2), sharey=True)
+    for ax, runs, title in ((axes[0], paper, "paper's protocol, t = 20 s"), (axes[1], quasi, "quasi-static protocol")):
         for basis, run_ in runs.items():
             x0, _, v = run_.axis()
             ax.plot(x0, v, label=LABELS[basis].split(") ", 1)[1])
@@ -243,14 +250,13 @@ def _figure_deflection(paper: dict, quasi: dict, path: Path) -> None:
         x = np.linspace(0, LENGTH, 101)
         ax.plot(x, -reference_deflection(x, force, "horizontal_element"), "k--", label="T&G (a), paper's Eqs. 33-34")
         ax.plot(x, -reference_deflection(x, force, "vertical_element"), "k:", label="T&G (b)")
-        ax.set_title(f"Fig. 11, {title}: force on beam {force:.3f} N/m")
+        ax.set_title(title)
         ax.set_xlabel("x (m)")
-        ax.set_ylabel("vertical deflection (m)")
-        ax.grid(alpha=0.3)
-    axes[1].legend(fontsize=7)
+    axes[0].set_ylabel("vertical deflection of the neutral axis (m)")
+    legend_outside(axes[1])
+    figure.suptitle(f"Fig. 11: deflection under the force the beam receives, {force:.3f} N/m")
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
-    plt.close(figure)
+    save(figure, path)
 
 
 def _navier_check(runs: dict) -> tuple[list, dict]:
@@ -269,39 +275,45 @@ def _navier_check(runs: dict) -> tuple[list, dict]:
     return rows, report
 
 
-#: the large rotation's runs: basis, material model, marker
-LARGE_ROTATION = (("bspline3", "linear_elastic", "."), ("bspline3_open", "linear_elastic", "."),
-                  ("bspline3_open", "neo_hookean", "x"))
+#: the large rotation's runs: basis, material model, how its neutral axis is drawn; the two
+#: open-knot runs nearly coincide, so one is a large open marker and the other a small
+#: filled one drawn on top, both visible where they overlap
+LARGE_ROTATION = (
+    ("bspline3", "linear_elastic", dict(marker="s", markersize=6, color="tab:blue", markerfacecolor="none", markevery=2, zorder=3)),
+    ("bspline3_open", "linear_elastic", dict(marker="o", markersize=8, color="tab:orange", markerfacecolor="none",
+                                             markeredgewidth=1.5, markevery=2, zorder=3)),
+    ("bspline3_open", "neo_hookean", dict(marker=".", markersize=6, color="tab:purple", markevery=2, zorder=4)),
+)
 
 
+@styled
 def _large_rotation(path: Path) -> tuple[list, dict]:
     """Paper Fig. 12 with the force applied in full: the elastica regime."""
     inertia = beam_theory.second_moment_of_area(HEIGHT)
     elastica = beam_theory.elastica_tip(800.0, LENGTH, E, inertia)
-    figure, ax = plt.subplots(figsize=(8, 6))
+    figure, ax = plt.subplots(figsize=(10, 7))
     x_e, y_e = beam_theory.elastica_shape(800.0, LENGTH, E, inertia)
-    ax.plot(x_e, AXIS_Y + y_e, "k-", linewidth=2, label="elastica")
+    ax.plot(x_e, AXIS_Y + y_e, "k-", linewidth=1.2, zorder=5, label="elastica")  # on top: the markers are measured against it
     x_lin = np.linspace(0, LENGTH, 101)
     ax.plot(x_lin, AXIS_Y - reference_deflection(x_lin, 800.0, "horizontal_element"), "k--", label="linear T&G (a)")
     rows, report = [], {"elastica": elastica._asdict()}
-    for basis, model, marker in LARGE_ROTATION:
+    for basis, model, style in LARGE_ROTATION:
         run_ = simulate("cantilever_large", **{"grid.basis": basis, "bodies.0.material.model": model})
         x0, u, v = run_.axis()
-        ax.plot(x0 + u, AXIS_Y + v, marker, markersize=4, label=f"{basis}, {model}")
+        label = f"{basis}, {model}" + ("" if run_.status == "completed" else f" (stopped at t = {run_.end_time:.2f} s)")
+        ax.plot(x0 + u, AXIS_Y + v, linestyle="none", label=label, **style)
         drop, shortening = -v[-1], -u[-1]
         rows.append([basis, model, f"{drop:.3f}", f"{shortening:.3f}", f"{drop / elastica.deflection:.4f}", f"{run_.wall_time:.1f}"])
         report[f"{basis}/{model}"] = {"drop": drop, "shortening": shortening, "status": run_.status}
     p = run_.particles
-    ax.scatter(p.x[:, 0], p.x[:, 1], s=3, c="0.6", label="points (last run)")
+    ax.scatter(p.x[:, 0], p.x[:, 1], s=3, c="0.7", zorder=1, label=f"points ({LARGE_ROTATION[-1][0]}, {LARGE_ROTATION[-1][1]})")
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title("Fig. 12: F = 800 in full (tip rotation 45 deg)")
-    ax.legend(fontsize=7)
-    ax.grid(alpha=0.3)
+    ax.set_title("Fig. 12: neutral axis under F = 800 in full (tip rotation 45 deg)")
+    legend_outside(ax)
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
-    plt.close(figure)
+    save(figure, path)
     rows.append(["elastica", "-", f"{elastica.deflection:.3f}", f"{elastica.shortening:.3f}", "1.0000", "-"])
     linear = beam_theory.euler_bernoulli_tip_deflection(800.0, LENGTH, E, inertia)
     rows.append(["linear theory", "-", f"{linear:.3f}", "0", f"{linear / elastica.deflection:.4f}", "-"])
