@@ -213,14 +213,14 @@ def _series_frame(time: float, file: Path) -> Frame:
     try:
         if not file.is_file():
             raise RunUnreadable(f"{file}: is missing (listed in {SERIES_FILE})")
-        mesh = meshio.read(file, file_format="vtu")
+        mesh = meshio.vtu.read(str(file))  # (meshio.read prints and exits on a damaged file)
     except RunUnreadable:
         raise
     except OSError as error:
         raise RunUnreadable(f"{file}: cannot be read: {error.strerror or error}") from None
     except Exception as error:  # a damaged file raises whatever its XML, base64 or zlib reader meets
-        raise RunUnreadable(f"{file}: is not a VTK particle file (damaged?): {type(error).__name__}: "
-                            f"{' '.join(str(error).split())}") from None
+        detail = " ".join(str(error).split()) or "does not parse"
+        raise RunUnreadable(f"{file}: is not a VTK particle file (damaged?): {type(error).__name__}: {detail}") from None
     data, n = mesh.point_data, len(mesh.points)
     for name, columns in SERIES_ARRAYS.items():
         values = data.get(name)
