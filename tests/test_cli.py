@@ -259,7 +259,8 @@ def test_undeclared_effects_run_no_code(tmp_path, capsys, monkeypatch):
     def trap(self, simulation):
         raise AssertionError(f"{type(self).__name__} was bound although not declared")
 
-    for cls in (*(entry.effect for entry in effects.REGISTRY), observers.EnergyBookkeeping, output.ParticleSeries):
+    for cls in (*(entry.effect for entry in effects.REGISTRY), observers.EnergyBookkeeping, output.ParticleSeries,
+                output.GridSeries):
         monkeypatch.setattr(cls, "bind", trap)
     path = write_scene(tmp_path, block(output=None))
     code, stdout, _ = run_cli(["info", path], capsys)

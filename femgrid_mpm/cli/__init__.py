@@ -1,4 +1,4 @@
-"""The ``femgrid-mpm`` command line: ``run``, ``resume``, ``info``, ``reproduce``, ``sweep`` and ``report``.
+"""The ``femgrid-mpm`` command line: ``run``, ``resume``, ``info``, ``plot``, ``reproduce``, ``sweep`` and ``report``.
 
 Exit codes (:data:`EXIT_CODES`): 0 done; 2 bad input (a scene file, an
 argument, an output directory that cannot be written), reported as one line
@@ -13,7 +13,7 @@ standard output ends the output quietly.  The library raises; only this package 
 Its modules: :mod:`~femgrid_mpm.cli.parser` (the arguments, the exit codes,
 the one-line messages), :mod:`~femgrid_mpm.cli.scene_input` (the scene of the
 arguments, checked and built), one module per command (:mod:`~femgrid_mpm.cli.run`
-for ``run`` and ``resume``, :mod:`~femgrid_mpm.cli.info`,
+for ``run`` and ``resume``, :mod:`~femgrid_mpm.cli.info`, :mod:`~femgrid_mpm.cli.plot`,
 :mod:`~femgrid_mpm.cli.reproduce`, :mod:`~femgrid_mpm.cli.sweep` for ``sweep`` and ``report``),
 :mod:`~femgrid_mpm.cli.progress` (the progress bars) and :mod:`~femgrid_mpm.cli.notes` (the library's
 notes, one line each).  None of them loads numpy at import: the libraries load inside
@@ -25,7 +25,7 @@ from __future__ import annotations
 import sys
 import warnings
 
-from . import info, parser, reproduce, run, sweep
+from . import info, parser, plot, reproduce, run, sweep
 from .notes import shown_notes
 from .parser import (EXIT_BAD_INPUT, EXIT_CODES, EXIT_DONE, EXIT_HANGUP, EXIT_INTERRUPTED, EXIT_STOPPED,
                      EXIT_TERMINATED, EXIT_WRITE_FAILED, PROG, BadInput, StdoutFailed, discard, say, show_warning)
@@ -34,7 +34,7 @@ __all__ = ["main", "BadInput", "PROG", "EXIT_CODES", "EXIT_DONE", "EXIT_WRITE_FA
            "EXIT_STOPPED", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "EXIT_HANGUP"]
 
 #: the function of each command
-COMMANDS = {"run": run.run, "resume": run.resume, "info": info.info, "reproduce": reproduce.reproduce,
+COMMANDS = {"run": run.run, "resume": run.resume, "info": info.info, "plot": plot.plot, "reproduce": reproduce.reproduce,
             "sweep": sweep.sweep, "report": sweep.report}
 
 

@@ -37,7 +37,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The parser of ``femgrid-mpm run | resume | info | reproduce | sweep | report``."""
+    """The parser of ``femgrid-mpm run | resume | info | plot | reproduce | sweep | report``."""
     from ..bases import BASES
 
     parser = _Parser(
@@ -45,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Material point method in 2D on finite-element background grids.",
         epilog="Exit codes: " + "; ".join(f"{code} {meaning}" for code, meaning in EXIT_CODES.items()) + ".",
     )
-    commands = parser.add_subparsers(dest="command", required=True, metavar="{run,resume,info,reproduce,sweep,report}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="{run,resume,info,plot,reproduce,sweep,report}")
 
     def scene_arguments(command):
         command.add_argument("scene", metavar="SCENE.toml", help="the scene file")
@@ -74,6 +74,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     info = commands.add_parser("info", help="check a scene and print what a run would do")
     scene_arguments(info)
+
+    from .plot import add_arguments as plot_arguments
+
+    plot_arguments(commands.add_parser("plot", help="draw a run's points and energies (PNGs), or its particle "
+                                       "series as an animation (--animate)"))
 
     reproduce = commands.add_parser("reproduce", help="run the paper's cases and write every figure and table")
     reproduce.add_argument("--out", default="results", metavar="DIR", help="output directory (default: results)")

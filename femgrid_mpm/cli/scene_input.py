@@ -64,7 +64,7 @@ def build(scene, path, observers):
     except ValueError as error:  # including an initial velocity that is NaN or infinite (it names its key)
         raise BadInput(f"{path}: {key_of_build_error(scene, str(error))}{error}") from None
     try:  # a run goes to its end: its records must fit
-        check_records(scene, simulation.n_steps, simulation.particles.n)
+        check_records(scene, simulation.n_steps, simulation.particles.n, simulation.grid.n_nodes)
     except ValueError as error:
         raise BadInput(f"{path}: {error}") from None
     return simulation

@@ -3,8 +3,8 @@
 ``energy.py``  :class:`EnergyBookkeeping`, the paper's energies and errors (Eqs. 25-32)
 ``probe.py``   :class:`Probe`, one number of the state per record (e.g. a modal amplitude)
 
-The particle series for ParaView is written by :class:`femgrid_mpm.output.ParticleSeries`,
-an observer of the output.
+The ParaView series are written by observers of the output (:class:`femgrid_mpm.output.ParticleSeries`,
+:class:`femgrid_mpm.output.GridSeries`), bound only when the scene's ``[output]`` asks for them.
 """
 
 from .energy import COLUMNS, EnergyBookkeeping, energy_drift, kinetic_energy

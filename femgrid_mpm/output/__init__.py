@@ -21,6 +21,9 @@ The outputs of a run in ``DIR`` (the contract documented in the README):
     What ran and how it ended; ``status = "running"`` until the end.
 ``particles.pvd`` + ``particles/particles_STEP.vtu``
     The points as a ParaView time series (when ``[output] particles = true``).
+``grid.pvd`` + ``grid/grid_STEP.vtu``
+    The grid's nodes as a ParaView time series at the same records: nodal mass,
+    momentum, velocity, a negative-mass flag (when ``[output] grid = true``).
 ``scene.toml``, ``source_scene.toml``
     The scene as run (overrides applied, every default spelled out) and the
     scene file as given, byte for byte.
@@ -30,7 +33,8 @@ The outputs of a run in ``DIR`` (the contract documented in the README):
 
 The package's modules: :mod:`~femgrid_mpm.output.files` (the names, atomic
 writes), :mod:`~femgrid_mpm.output.energy_csv`,
-:mod:`~femgrid_mpm.output.particle_series`, :mod:`~femgrid_mpm.output.results`
+:mod:`~femgrid_mpm.output.particle_series` and :mod:`~femgrid_mpm.output.grid_series` (both
+:class:`~femgrid_mpm.output.series.MeshSeries`), :mod:`~femgrid_mpm.output.results`
 (``final.npz``, ``summary.json``) and :mod:`~femgrid_mpm.output.toml_writer`
 (``scene.toml``); :class:`RunOutputs`, here, writes them all for one run.
 
@@ -58,7 +62,11 @@ from .files import (
     CHECKPOINT_FILE,
     ENERGY_FILE,
     FINAL_FILE,
+    GRID_DIRECTORY,
+    GRID_FILE,
+    GRID_PATTERN,
     SCENE_FILE,
+    SERIES,
     SERIES_DIRECTORY,
     SERIES_FILE,
     SERIES_PATTERN,
@@ -70,6 +78,7 @@ from .files import (
     probe_writable,
     shortest_text,
 )
+from .grid_series import GridSeries
 from .particle_series import ParticleSeries, collection_text
 from .results import json_safe, write_final_state, write_summary
 from .toml_writer import scene_to_toml
@@ -78,6 +87,9 @@ __all__ = [
     "CHECKPOINT_FILE",
     "ENERGY_FILE",
     "FINAL_FILE",
+    "GRID_DIRECTORY",
+    "GRID_FILE",
+    "GRID_PATTERN",
     "SCENE_FILE",
     "SERIES_DIRECTORY",
     "SERIES_FILE",
@@ -85,6 +97,7 @@ __all__ = [
     "SOURCE_SCENE_FILE",
     "SUMMARY_FILE",
     "EnergyCsv",
+    "GridSeries",
     "OutputRefused",
     "ParticleSeries",
     "RunOutputs",
@@ -121,10 +134,13 @@ def _same_file(first: Path, second: Path) -> bool:
 
 
 def declared_observers(scene, directory: Path, flush_seconds: float = 1.0) -> list:
-    """The output effects a scene declares (beyond energy, which the solver owns)."""
-    if scene.output is not None and scene.output.particles:
-        return [ParticleSeries(Path(directory), flush_seconds)]
-    return []
+    """The output effects a scene declares (beyond energy, which the solver owns):
+    the particle series, the grid series; none of them costs anything undeclared."""
+    output = scene.output
+    if output is None:
+        return []
+    declared = ((output.particles, ParticleSeries), (output.grid, GridSeries))
+    return [series(Path(directory), flush_seconds) for on, series in declared if on]
 
 
 class RunOutputs:
@@ -164,17 +180,19 @@ class RunOutputs:
         """Every path this run writes, replaces or removes in its directory (a resumed
         run, ``starting = False``, keeps its scene files)."""
         directory = self.directory
-        names = [ENERGY_FILE, FINAL_FILE, SUMMARY_FILE, SERIES_FILE, CHECKPOINT_FILE]
+        names = [ENERGY_FILE, FINAL_FILE, SUMMARY_FILE, CHECKPOINT_FILE, *(collection for collection, _, _ in SERIES)]
         names += [SCENE_FILE, SOURCE_SCENE_FILE] if starting else []
         paths = [directory / name for name in names]
-        series = directory / SERIES_DIRECTORY
-        if series.is_dir():
-            paths += [path for path in series.iterdir() if SERIES_PATTERN.match(path.name)]
+        for _, subdirectory, pattern in SERIES:
+            series = directory / subdirectory
+            if series.is_dir():
+                paths += [path for path in series.iterdir() if pattern.match(path.name)]
         return paths
 
     def check(self, starting: bool = True) -> None:
         """Raise :class:`OutputRefused` if the run would write over its own scene file, or
-        where a directory stands in the place of a file (or a file in that of ``particles/``);
+        where a directory stands in the place of a file (or a file in that of ``particles/``
+        or ``grid/``);
         touches no file.  Called before the run, so that nothing is written or removed then."""
         source = self.source if starting else None
         for path in self.paths(starting):
@@ -183,9 +201,10 @@ class RunOutputs:
                                     "give another --out directory")
             if path.is_dir():
                 raise OutputRefused(f"{path}: is a directory, where the run writes a file")
-        series = self.directory / SERIES_DIRECTORY
-        if self.observers and (series.exists() or series.is_symlink()) and not series.is_dir():
-            raise OutputRefused(f"{series}: is not a directory, where the run writes its particle series")
+        for observer in self.observers:
+            series = self.directory / observer.name
+            if (series.exists() or series.is_symlink()) and not series.is_dir():
+                raise OutputRefused(f"{series}: is not a directory, where the run writes its {observer.name} series")
 
     def start(self, simulation, source_bytes: bytes | None = None) -> None:
         """Create the directory, clear an earlier run's outputs, write the scene and a
@@ -201,8 +220,8 @@ class RunOutputs:
         directory.mkdir(parents=True, exist_ok=True)
         # every place this run writes or removes in must take a file before anything is
         # written or removed: a failure then leaves an earlier run's outputs whole
-        series = directory / SERIES_DIRECTORY
-        for place in (directory, series) if series.is_dir() else (directory,):
+        series = [directory / subdirectory for _, subdirectory, _ in SERIES]
+        for place in (directory, *(place for place in series if place.is_dir())):
             probe_writable(place)
         if source_bytes is None and self.source is not None:
             source_bytes = self.source.read_bytes()
@@ -216,12 +235,13 @@ class RunOutputs:
         atomic_write(directory / SCENE_FILE, scene_to_toml(self.scene, header))
         # An earlier run's files would mix with this run's (more particle
         # files than records, an energy.csv of another scene): remove ours only.
-        for name in (ENERGY_FILE, FINAL_FILE, SERIES_FILE, CHECKPOINT_FILE):
+        for name in (ENERGY_FILE, FINAL_FILE, CHECKPOINT_FILE, *(collection for collection, _, _ in SERIES)):
             (directory / name).unlink(missing_ok=True)
-        if series.is_dir():
-            for stale in series.iterdir():
-                if SERIES_PATTERN.match(stale.name):
-                    stale.unlink()
+        for place, (_, _, pattern) in zip(series, SERIES):
+            if place.is_dir():
+                for stale in place.iterdir():
+                    if pattern.match(stale.name):
+                        stale.unlink()
         write_summary(
             directory / SUMMARY_FILE,
             self._summary(simulation.result("running", "the run has not ended (if it stays so, it was killed)"), None),
@@ -241,12 +261,12 @@ class RunOutputs:
 
     def state(self) -> dict:
         """What the files of this run need to go on after a checkpoint (JSON):
-        where the scene came from, the overrides, the particle series so far."""
+        where the scene came from, the overrides, each series' records so far."""
         return {
             "scene_file": str(self.source) if self.source is not None else None,
             "overrides": self.overrides,
             "checkpoint_every": self.checkpoint_every,
-            "series": [[time, name] for observer in self.observers for time, name in observer.entries],
+            "series": {observer.name: [[time, name] for time, name in observer.entries] for observer in self.observers},
         }
 
     @classmethod
@@ -255,12 +275,16 @@ class RunOutputs:
         (:meth:`state`); call :meth:`resume` once the simulation is restored."""
         outputs = cls(directory, scene, source=state["scene_file"], overrides=state["overrides"],
                       flush_seconds=flush_seconds, checkpoint_every=state["checkpoint_every"])
-        outputs._series_state = [(float(time), str(name)) for time, name in state["series"]]
+        series = state["series"]
+        if isinstance(series, list):  # a checkpoint of the particle series alone
+            series = {ParticleSeries.name: series}
+        outputs._series_state = {str(observer): [(float(time), str(name)) for time, name in entries]
+                                 for observer, entries in series.items()}
         return outputs
 
     def resume(self, simulation) -> None:
         """Go on writing into the directory of a checkpointed run: the scene files
-        stay, ``energy.csv`` and ``particles.pvd`` are rewritten with the records up
+        stay, ``energy.csv`` and each series' ``.pvd`` are rewritten with the records up
         to the checkpoint (a killed run's later records are written again, the same,
         as the run comes to them), and the summary says ``running``.
 
@@ -271,7 +295,7 @@ class RunOutputs:
         """
         self.simulation = simulation
         for observer in self.observers:
-            observer.entries[:] = self._series_state
+            observer.entries[:] = self._series_state.get(observer.name, [])
             observer.close()
         write_summary(
             self.directory / SUMMARY_FILE,
@@ -317,7 +341,7 @@ class RunOutputs:
         names = [SCENE_FILE, SUMMARY_FILE]
         names += [SOURCE_SCENE_FILE] if self.source is not None else []
         names += [ENERGY_FILE] if self.energy is not None else []
-        names += [SERIES_FILE] if self.observers else []
+        names += [observer.collection for observer in self.observers]
         names += [FINAL_FILE] if result.status != "running" else []
         # a checkpoint is written every N steps: a run shorter than N has none
         names += [CHECKPOINT_FILE] if self.checkpoint_every and (self.directory / CHECKPOINT_FILE).exists() else []

@@ -23,6 +23,12 @@ CHECKPOINT_FILE = "checkpoint.npz"
 SERIES_DIRECTORY = "particles"
 #: names of one series' point files: ``particles/particles_000120.vtu`` (the step)
 SERIES_PATTERN = re.compile(r"^particles_\d+\.vtu$")
+GRID_FILE = "grid.pvd"
+GRID_DIRECTORY = "grid"
+#: names of the grid series' files: ``grid/grid_000120.vtu`` (the step)
+GRID_PATTERN = re.compile(r"^grid_\d+\.vtu$")
+#: every series a run may write: its collection, its directory, the names of its files
+SERIES = ((SERIES_FILE, SERIES_DIRECTORY, SERIES_PATTERN), (GRID_FILE, GRID_DIRECTORY, GRID_PATTERN))
 
 
 @contextlib.contextmanager

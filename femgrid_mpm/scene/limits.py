@@ -23,6 +23,8 @@ ENERGY_ROW_BYTES = 1000
 POINT_RECORD_BYTES = 120
 #: a file of the particle series besides its points (headers, its line in ``particles.pvd``)
 FRAME_BYTES = 2000
+#: a node in one file of the grid series (position, mass, momentum, velocity, flag, its cell)
+NODE_RECORD_BYTES = 100
 
 
 def step_count(end: float, dt: float, max_steps: int) -> int:
@@ -42,8 +44,9 @@ def record_count(steps: int, every: int) -> int:
     return steps // every + 2
 
 
-def record_bytes(scene, steps: int, points: int) -> int:
-    """About how many bytes the records of ``scene`` take over ``steps`` with ``points``."""
+def record_bytes(scene, steps: int, points: int, nodes: int = 0) -> int:
+    """About how many bytes the records of ``scene`` take over ``steps`` with ``points``
+    (and ``nodes``, for the grid series)."""
     output = scene.output
     if output is None:
         return 0
@@ -51,6 +54,8 @@ def record_bytes(scene, steps: int, points: int) -> int:
     size = records * ENERGY_ROW_BYTES if output.energy else 0
     if output.particles:
         size += records * (FRAME_BYTES + POINT_RECORD_BYTES * points)
+    if output.grid:
+        size += records * (FRAME_BYTES + NODE_RECORD_BYTES * nodes)
     return size
 
 
@@ -70,17 +75,18 @@ def run_steps(scene, dt: float) -> int:
         raise ValueError(f"time.dt: {where}{error}") from None
 
 
-def check_records(scene, steps: int, points: int) -> None:
+def check_records(scene, steps: int, points: int, nodes: int = 0) -> None:
     """Raise ValueError (``output.every: ...``, naming the size and the keys) if the records
-    of a whole run of ``steps`` with ``points`` would exceed ``output.max_bytes``.
+    of a whole run of ``steps`` with ``points`` (and ``nodes``) would exceed ``output.max_bytes``.
 
     A check for a run that goes to its end (the command line's); a simulation built to be
     stepped a few times need not pass it.
     """
     output = scene.output
-    size = record_bytes(scene, steps, points)
+    size = record_bytes(scene, steps, points, nodes)
     if output is not None and size > output.max_bytes:
-        what = " and ".join(name for name, on in (("energy", output.energy), ("particles", output.particles)) if on)
+        what = " and ".join(name for name, on in (("energy", output.energy), ("particles", output.particles),
+                                                  ("grid", output.grid)) if on)
         raise ValueError(
             f"output.every: {record_count(steps, output.every):.3g} records ({what}) of {steps:.3g} steps "
             f"would take about {size / 1e9:.3g} GB, more than output.max_bytes = {output.max_bytes:.3g} "

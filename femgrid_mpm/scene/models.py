@@ -197,11 +197,13 @@ ReferenceSpec = effects.table_type("reference")
 
 
 class Output(_Model):
-    """``[output]``: a record every ``every`` steps; ``energy`` bookkeeping; ``particles`` for ParaView."""
+    """``[output]``: a record every ``every`` steps; ``energy`` bookkeeping; ``particles`` and
+    ``grid`` (nodal mass, momentum, velocity, negative-mass flag) as ParaView series."""
 
     every: PositiveInt = 1
     energy: bool = True
     particles: bool = False
+    grid: bool = False
     #: records estimated to take more bytes than this are refused before the run starts
     max_bytes: Annotated[int, Field(ge=1)] = MAX_RECORD_BYTES
 
