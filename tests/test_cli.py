@@ -30,7 +30,7 @@ import pytest
 from femgrid_mpm import cli
 from femgrid_mpm.observers import COLUMNS
 from femgrid_mpm.output import EnergyCsv, atomic_path, atomic_write, scene_to_toml
-from femgrid_mpm.scene import Scene, bundled_scene, load_scene
+from femgrid_mpm.scene import Scene, load_scene
 from femgrid_mpm.solver import Simulation
 from helpers import run_cli
 
