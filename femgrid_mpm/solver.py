@@ -209,7 +209,7 @@ class Simulation:
         in dt unless a(0) = 0); ``scheme = "centred"`` starts with the half step v(0) +
         dt/2 a(0) and ends with one, the steps between the paper's (docs/accuracy.md).
         """
-        ctx, p, dt = self.project(), self.particles, self.dt
+        ctx, dt = self.project(), self.dt
         if record:
             self._run(Stage.OBSERVE)
         self._guard_energy(record)

@@ -21,7 +21,6 @@ import pytest
 from femgrid_mpm import cli
 from femgrid_mpm.checkpoint import CHECKPOINT_FILE, CheckpointError, read_checkpoint, write_checkpoint
 from femgrid_mpm.observers import COLUMNS
-from femgrid_mpm.output import scene_to_toml
 from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
 from helpers import run_cli

@@ -30,7 +30,7 @@ import pytest
 from femgrid_mpm import cli
 from femgrid_mpm.observers import COLUMNS
 from femgrid_mpm.output import EnergyCsv, atomic_path, atomic_write, scene_to_toml
-from femgrid_mpm.scene import Scene, bundled_scene, load_scene
+from femgrid_mpm.scene import Scene, load_scene
 from femgrid_mpm.solver import Simulation
 from helpers import run_cli
 
@@ -523,6 +523,27 @@ def test_reproduce_runs_every_case_and_prints_its_table(tmp_path, capsys, monkey
     calls.clear()
     assert run_cli(["reproduce", "--out", tmp_path / "again", "--case", "second"], capsys)[0] == 0
     assert calls == [tmp_path / "again" / "second"]
+
+
+def test_version_prints_the_installed_distributions_version(capsys):
+    import importlib.metadata
+
+    code, stdout, err = run_cli(["--version"], capsys)
+    assert (code, err) == (0, "")
+    assert stdout == f"femgrid-mpm {importlib.metadata.version('femgrid-mpm')}\n"
+
+
+def test_reproduce_lists_its_cases_and_names_them_for_an_unknown_case(tmp_path, capsys):
+    from femgrid_mpm.reproduce import CASES
+
+    code, stdout, err = run_cli(["reproduce", "--list", "--out", tmp_path / "results"], capsys)
+    assert (code, err) == (0, "")
+    assert stdout.splitlines() == list(CASES)
+    assert not (tmp_path / "results").exists()  # nothing run, nothing written
+    code, _, err = run_cli(["reproduce", "--case", "bar", "--out", tmp_path / "results"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    (line,) = err.splitlines()
+    assert line == f"femgrid-mpm: error: --case bar: no such case (cases: {', '.join(CASES)})"
 
 
 # -- the README documents the contract ------------------------------------------------------------

@@ -38,6 +38,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``femgrid-mpm run | resume | info | plot | reproduce | sweep | report``."""
+    from .. import __version__
     from ..bases import BASES
 
     parser = _Parser(
@@ -45,6 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Material point method in 2D on finite-element background grids.",
         epilog="Exit codes: " + "; ".join(f"{code} {meaning}" for code, meaning in EXIT_CODES.items()) + ".",
     )
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="{run,resume,info,plot,reproduce,sweep,report}")
 
     def scene_arguments(command):
@@ -83,6 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce = commands.add_parser("reproduce", help="run the paper's cases and write every figure and table")
     reproduce.add_argument("--out", default="results", metavar="DIR", help="output directory (default: results)")
     reproduce.add_argument("--case", action="append", default=[], metavar="NAME", help="only this case (repeatable; default: all)")
+    reproduce.add_argument("--list", action="store_true", help="print the cases' names, one a line, and run nothing")
 
     from .sweep import default_workers, workers_count
 

@@ -16,6 +16,10 @@ def reproduce(args) -> int:
     from ..reproduce import CASES, PLANNED_RUNS
     from ..reproduce.timing import following
 
+    if args.list:
+        for name in CASES:
+            emit(name)
+        return EXIT_DONE
     unknown = [name for name in args.case if name not in CASES]
     if unknown:
         raise BadInput(f"--case {unknown[0]}: no such case (cases: {', '.join(CASES)})")

@@ -4,6 +4,7 @@ completed by an exact solve in a layer along the bodies' edges."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -12,6 +13,9 @@ from ..kernels.arithmetic import fused
 from ..kernels.compiled import compiled
 from .direct import _factor, _rows_and_block
 from .sparse import _CompiledCSR, _transpose_times_dense
+
+if TYPE_CHECKING:  # system.py imports this module
+    from .system import _System
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@
     The scene's tables as pydantic models (:class:`Scene` and its parts); the
     effects' tables come from the registry of :mod:`femgrid_mpm.effects`.
 ``loading``
-    Reading a scene file (:func:`load_scene`), the bundled scenes (:func:`bundled_scene`).
+    Reading a scene file (:func:`load_scene`), the bundled scenes (:func:`bundled_scenes`, :func:`bundled_scene`).
 ``validation``
     Overrides set by dotted key, checks beyond pydantic's, :class:`SceneError`.
 ``messages``
@@ -17,7 +17,7 @@ Examples
 'q2'
 """
 
-from .loading import BUNDLED_SCENES, bundled_scene, load_scene
+from .loading import BUNDLED_SCENES, bundled_scene, bundled_scenes, load_scene
 from .messages import describe_validation_error
 from .models import (
     LOAD_KINDS,
@@ -57,6 +57,7 @@ __all__ = [
     "SupportSpec",
     "TimeSpec",
     "bundled_scene",
+    "bundled_scenes",
     "describe_validation_error",
     "load_scene",
 ]

@@ -56,7 +56,33 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
     return validated(Scene, data, overrides or {}, source)
 
 
+def bundled_scenes() -> list[str]:
+    """The names of the scenes shipped with the package, sorted: each one a
+    :func:`bundled_scene` and a ``SCENE`` of ``femgrid-mpm run`` as ``femgrid_mpm/scenes/NAME.toml``.
+
+    Examples
+    --------
+    >>> "vibrating_bar" in bundled_scenes()
+    True
+    """
+    return sorted(path.stem for path in BUNDLED_SCENES.glob("*.toml"))
+
+
 def bundled_scene(name: str) -> Scene:
     """One of the scenes shipped with the package (``femgrid_mpm/scenes/NAME.toml``,
-    also reachable as ``scenes/`` at the repository's top level)."""
+    also reachable as ``scenes/`` at the repository's top level).
+
+    Parameters
+    ----------
+    name : str
+        One of :func:`bundled_scenes`, without ``.toml``.
+
+    Raises
+    ------
+    SceneError
+        One line naming the scenes there are, for a name that is not one of them.
+    """
+    known = bundled_scenes()
+    if name not in known:  # a name, not a path: "../x" or "bar.toml" is refused too
+        raise SceneError(f"no bundled scene {name!r} (bundled scenes: {', '.join(known)})")
     return load_scene(BUNDLED_SCENES / f"{name}.toml")
