@@ -78,6 +78,8 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce = commands.add_parser("reproduce", help="run the paper's cases and write every figure and table")
     reproduce.add_argument("--out", default="results", metavar="DIR", help="output directory (default: results)")
     reproduce.add_argument("--case", action="append", default=[], metavar="NAME", help="only this case (repeatable; default: all)")
+    reproduce.add_argument("--gallery", metavar="DIR", help="also copy the README's gallery figures of the cases run into DIR "
+                           "(femgrid_mpm.reproduce.gallery.GALLERY)")
 
     from .sweep import default_workers, workers_count
 
