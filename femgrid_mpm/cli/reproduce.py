@@ -25,7 +25,7 @@ def reproduce(args) -> int:
         probe_writable(out)
     except OSError as error:
         raise BadInput(f"--out {out}: cannot write there: {error.strerror or error}") from None
-    gallery = output_directory(args.gallery) if args.gallery is not None else None
+    gallery = output_directory(args.gallery, "--gallery") if args.gallery is not None else None
     if gallery is not None:
         try:
             gallery.mkdir(parents=True, exist_ok=True)
