@@ -10,7 +10,7 @@ largest change of any point's final position and velocity against the
 1e-10 run (relative to the bar's amplitude), the largest energy lost in P2G (``E_int``, zero for an exact consistent solve), the CG iterations per step,
 and the wall time.  The default ``cg_tolerance`` is chosen from this table:
 the loosest value whose period and drift agree with 1e-10's in every digit
-the README reports, with the states still agreeing far below the
+docs/performance.md reports, with the states still agreeing far below the
 discretization error.
 """
 

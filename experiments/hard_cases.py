@@ -1,4 +1,4 @@
-"""The README's "Hard cases" tables: HRZ and the mass threshold against row sums.
+"""The tables of docs/hard_cases.md: HRZ and the mass threshold against row sums.
 
 Run: ``python experiments/hard_cases.py`` (about a minute).  Prints
 

@@ -1,4 +1,4 @@
-"""The command line and its outputs: the contract of README "Command line" and "Outputs".
+"""The command line and its outputs: the contract of docs/cli.md and docs/outputs.md.
 
 References: rigid motion is exact (a block moving at 10 m/s is at
 ``x0 + 10 t`` to 1e-12 m), the vibrating bar's initial kinetic energy is
@@ -546,43 +546,120 @@ def test_reproduce_lists_its_cases_and_names_them_for_an_unknown_case(tmp_path, 
     assert line == f"femgrid-mpm: error: --case bar: no such case (cases: {', '.join(CASES)})"
 
 
-# -- the README documents the contract ------------------------------------------------------------
+def test_reproduce_gallery_copies_the_figures_of_the_cases_run(tmp_path, capsys, monkeypatch):
+    """``--gallery DIR``: each picture of ``GALLERY`` whose case ran is its case's figure, byte for byte."""
+    from femgrid_mpm import reproduce
+    from femgrid_mpm.reproduce import gallery
 
-README = ROOT / "README.md"
+    def case(name):
+        def run(out_dir):
+            (Path(out_dir) / "sub").mkdir(parents=True)
+            (Path(out_dir) / "sub" / "figure.png").write_bytes(f"png of {name}".encode())
+
+        return run
+
+    monkeypatch.setattr(reproduce, "CASES", {"first": case("first"), "second": case("second")})
+    monkeypatch.setattr(reproduce, "PLANNED_RUNS", {"first": lambda: 0, "second": lambda: 0})
+    monkeypatch.setattr(gallery, "GALLERY", {"a.png": ("first", "sub/figure.png"), "b.png": ("second", "sub/figure.png")})
+    code, _, err = run_cli(["reproduce", "--out", tmp_path / "results", "--case", "second", "--gallery", tmp_path / "g"], capsys)
+    assert code == 0, err
+    assert sorted(p.name for p in (tmp_path / "g").iterdir()) == ["b.png"]
+    assert (tmp_path / "g" / "b.png").read_bytes() == b"png of second"
+    (tmp_path / "file").write_text("")
+    code, _, err = run_cli(["reproduce", "--out", tmp_path / "results", "--gallery", tmp_path / "file"], capsys)
+    assert code == 2 and err.count("\n") == 1 and "--gallery" in err
 
 
-def readme_section(title: str) -> str:
-    text = README.read_text()
-    start = text.index(f"\n## {title}\n")
-    end = text.find("\n## ", start + 1)
-    return text[start:end]
+# -- the docs document the contract ---------------------------------------------------------------
+
+DOCS = ROOT / "docs"
 
 
-def scene_keys(node=Scene, seen=None) -> set[str]:
-    """Every key a scene file can hold: the fields of Scene and of every model or effect under it."""
+def doc_text(page: str) -> str:
+    return (DOCS / page).read_text()
+
+
+def models_of(annotation) -> list:
+    """The pydantic models an annotation holds (tuple[...], Union[...], Annotated[...], None left out)."""
     import typing
 
-    seen = set() if seen is None else seen
-    origin = typing.get_origin(node)
-    if origin is not None:  # tuple[...], Union[...], Annotated[...]
-        arguments = typing.get_args(node)[:1] if origin is typing.Annotated else typing.get_args(node)
-        return set().union(*(scene_keys(argument, seen) for argument in arguments))
-    fields = getattr(node, "model_fields", None) or getattr(node, "__pydantic_fields__", None)
-    if not isinstance(fields, dict) or node in seen:
-        return set()
-    seen.add(node)
-    keys = set(fields)
-    for info in fields.values():
-        keys |= scene_keys(info.annotation, seen)
+    origin = typing.get_origin(annotation)
+    if origin is not None:
+        arguments = typing.get_args(annotation)[:1] if origin is typing.Annotated else typing.get_args(annotation)
+        return [model for argument in arguments for model in models_of(argument)]
+    return [annotation] if isinstance(fields_of(annotation), dict) else []
+
+
+def fields_of(model):
+    return getattr(model, "model_fields", None) or getattr(model, "__pydantic_fields__", None)
+
+
+def model_keys(model) -> set[str]:
+    """A table's keys as the scene reference spells them: ``key``, and ``key.sub`` for an inline table."""
+    keys = set()
+    for name, info in fields_of(model).items():
+        keys.add(name)
+        for inner in models_of(info.annotation):
+            keys |= {f"{name}.{sub}" for sub in model_keys(inner)}
     return keys
 
 
-def test_readme_documents_every_scene_key_option_output_and_exit_code():
-    scene_section = readme_section("Scene files")
-    spellings = ("`{}`", ".{}`", "`[{}]`", "`[[{}]]`")  # a key, material.key, a table, an array of tables
-    undocumented = [key for key in sorted(scene_keys()) if not any(s.format(key) in scene_section for s in spellings)]
-    assert undocumented == [], "scene keys missing from README 'Scene files'"
-    command_section = readme_section("Command line")
+def kind_of(model) -> str:
+    import typing
+
+    (kind,) = typing.get_args(fields_of(model)["kind"].annotation)
+    return kind
+
+
+def scene_sections() -> dict:
+    """Every section of the scene reference the models ask for: (table, kind) -> its keys.
+
+    The top level is ("", None); a table of several kinds (``[[loads]]``) has one section per
+    kind, whose ``kind`` the section's heading gives."""
+    sections = {("", None): set()}
+    for name, info in Scene.model_fields.items():
+        models = models_of(info.annotation)
+        if not models:
+            sections[("", None)].add(name)
+        elif len(models) == 1:
+            sections[(name, None)] = model_keys(models[0])
+        else:
+            sections.update({(name, kind_of(model)): model_keys(model) for model in models})
+    return sections
+
+
+def documented_sections() -> dict:
+    """The sections of docs/scenes.md's table of keys: a row ``**`[table]`**`` (with ``, `kind = "k"```)
+    opens one; every backticked name in the first cell of the rows after it is a key."""
+    text = doc_text("scenes.md")
+    start = text.index("| key | default | meaning |")
+    rows = text[start:text.index("\n\n", start)].splitlines()[2:]
+    sections, current = {("", None): set()}, ("", None)
+    for row in rows:
+        cell = row.split("|")[1]
+        heading = re.fullmatch(r" \*\*`\[{1,2}(\w+)\]{1,2}`\*\*(?:, `kind = \"(\w+)\"`)? ", cell)
+        if heading:
+            current = heading.groups()
+            assert current not in sections, f"docs/scenes.md documents {current} twice"
+            sections[current] = {"kind"} if current[1] else set()
+            continue
+        for key in re.findall(r"`([\w.]+)`", cell):
+            sections[current].add(key)
+    return sections
+
+
+def test_scene_reference_documents_exactly_the_models_keys():
+    """docs/scenes.md lists every key of the scene's models and of the effects registry's tables,
+    in its table's section, and nothing they do not have: the page cannot drift."""
+    expected, documented = scene_sections(), documented_sections()
+    assert sorted(documented, key=str) == sorted(expected, key=str), "tables of docs/scenes.md"
+    for section, keys in expected.items():
+        assert sorted(keys - documented[section]) == [], f"keys of {section} missing from docs/scenes.md"
+        assert sorted(documented[section] - keys) == [], f"docs/scenes.md documents keys {section} does not have"
+
+
+def test_docs_document_every_option_output_and_exit_code():
+    command_section = doc_text("cli.md")
     parser = cli.parser.build_parser()
     (commands,) = [action for action in parser._actions if isinstance(action, type(parser._subparsers._group_actions[0]))]
     for name, subparser in commands.choices.items():
@@ -593,14 +670,14 @@ def test_readme_documents_every_scene_key_option_output_and_exit_code():
                     assert f"`{option}" in command_section, (name, option)
     for code in cli.EXIT_CODES:
         assert f"\n| {code} |" in command_section, code
-    outputs_section = readme_section("Outputs")
+    outputs_section = doc_text("outputs.md")
     for name in [*COLUMNS, "energy.csv", "final.npz", "summary.json", "particles.pvd", "scene.toml", "source_scene.toml",
                  "x0", "x", "v", "stress", "strain", "mass", "volume", "body", "velocity", "displacement", "stress_xx"]:
         assert f"`{name}`" in outputs_section, name
 
 
-def test_readme_scene_example_is_a_valid_scene_with_every_effect(tmp_path, capsys):
-    (example,) = re.findall(r"```toml\n(.*?)```", readme_section("Scene files"), flags=re.S)
+def test_scene_reference_example_is_a_valid_scene_with_every_effect(tmp_path, capsys):
+    (example,) = re.findall(r"```toml\n(.*?)```", doc_text("scenes.md"), flags=re.S)
     path = tmp_path / "example.toml"
     path.write_text(example)
     code, stdout, err = run_cli(["info", path], capsys)

@@ -86,6 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--out", default="results", metavar="DIR", help="output directory (default: results)")
     reproduce.add_argument("--case", action="append", default=[], metavar="NAME", help="only this case (repeatable; default: all)")
     reproduce.add_argument("--list", action="store_true", help="print the cases' names, one a line, and run nothing")
+    reproduce.add_argument("--gallery", metavar="DIR", help="also copy the README's gallery figures of the cases run into DIR "
+                           "(femgrid_mpm.reproduce.gallery.GALLERY)")
 
     from .sweep import default_workers, workers_count
 
@@ -106,17 +108,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def output_directory(text: str) -> Path:
-    """``--out`` as a path; raises :class:`BadInput` for an empty one (an unset
+def output_directory(text: str, option: str = "--out") -> Path:
+    """``--out`` (or ``option``) as a path; raises :class:`BadInput` for an empty one (an unset
     ``$OUT`` would mean the working directory) or one that is a file."""
     if not text:  # (a name of spaces is a directory's name like any other)
-        raise BadInput("--out: is empty (give a directory, e.g. --out results)")
+        raise BadInput(f"{option}: is empty (give a directory, e.g. {option} results)")
     out = Path(text)
     try:
         if out.exists() and not out.is_dir():
-            raise BadInput(f"--out {out}: exists and is not a directory")
+            raise BadInput(f"{option} {out}: exists and is not a directory")
     except OSError as error:  # e.g. a name longer than the file system allows
-        raise BadInput(f"--out {out}: cannot be used: {error.strerror or error}") from None
+        raise BadInput(f"{option} {out}: cannot be used: {error.strerror or error}") from None
     return out
 
 

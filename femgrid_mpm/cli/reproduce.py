@@ -6,7 +6,7 @@ import contextlib
 import sys
 import warnings
 
-from .parser import EXIT_DONE, BadInput, emit, output_directory
+from .parser import EXIT_DONE, EXIT_WRITE_FAILED, BadInput, emit, output_directory, say
 from .progress import runs_bar
 
 
@@ -29,6 +29,13 @@ def reproduce(args) -> int:
         probe_writable(out)
     except OSError as error:
         raise BadInput(f"--out {out}: cannot write there: {error.strerror or error}") from None
+    gallery = output_directory(args.gallery, "--gallery") if args.gallery is not None else None
+    if gallery is not None:
+        try:
+            gallery.mkdir(parents=True, exist_ok=True)
+            probe_writable(gallery)
+        except OSError as error:
+            raise BadInput(f"--gallery {gallery}: cannot write there: {error.strerror or error}") from None
     warnings.simplefilter("ignore")  # expected events (negative masses under "warn") are in the tables
     chosen = [name for name in CASES if not args.case or name in args.case]
     bar, follow = runs_bar(sum(PLANNED_RUNS[name]() for name in chosen), sys.stderr.isatty())
@@ -44,4 +51,12 @@ def reproduce(args) -> int:
     finally:
         if bar is not None:
             bar.close()
+    if gallery is not None:
+        from ..reproduce.gallery import copy_gallery
+
+        try:
+            copy_gallery(out, gallery, chosen)
+        except OSError as error:  # after the run: its results are written, the copy is not
+            say("error", f"--gallery {gallery}: cannot write there: {error.strerror or error}")
+            return EXIT_WRITE_FAILED
     return EXIT_DONE

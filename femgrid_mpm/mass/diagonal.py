@@ -3,7 +3,7 @@
 Negative and tiny lumped masses (q2, serendipity) have two remedies here:
 the threshold of :class:`LumpedMass` (the absolute mass below a fraction of
 a node's full share) and :class:`HrzMass` (a positive diagonal for every
-basis, with transfers to match); docs and the README's "Hard cases" have
+basis, with transfers to match); docs/hard_cases.md has
 what they measure.
 """
 

@@ -8,7 +8,7 @@ Files that grow during the run (``energy.csv``, ``particles.pvd``) are
 rewritten whole at most about once a second (:class:`Throttle`) and once
 more when the run ends, also when it stops on a numerical event.
 
-The outputs of a run in ``DIR`` (the contract documented in the README):
+The outputs of a run in ``DIR`` (the contract documented in docs/outputs.md):
 
 ``energy.csv``
     One row per record, the first at t = 0: :data:`femgrid_mpm.observers.COLUMNS`

@@ -129,7 +129,7 @@ def clamped_ratio_scale() -> float:
 #: ``femgrid-mpm reproduce`` stays at the paper's resolution; the full sweep
 #: (experiments/cantilever.py) adds 4 and 8 cells through the depth, where the
 #: consistent-mass runs alone take over an hour: their critical step is a
-#: sixth of the lumped one for cubic splines (see README, the critical step)
+#: sixth of the lumped one for cubic splines (see docs/time_step.md)
 PAPER_RESOLUTION = (0.5,)
 ALL_RESOLUTIONS = (0.5, 0.25, 0.125)
 
