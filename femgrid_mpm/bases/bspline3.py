@@ -115,7 +115,7 @@ class BSpline3Basis:
     def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float,
               points_per_cell: int = 2) -> Discretization:
         element = ElementBSpline3()
-        ny = n_elements[1] + 3  # functions along y (node (i, j) is i * ny + j)
+        nx, ny = n_elements[0] + 3, n_elements[1] + 3  # functions per direction (node (i, j) is i * ny + j)
         positions = [greville_abscissae(n, self.knots) for n in n_elements]
         gx, gy = np.meshgrid(lower[0] + spacing * positions[0], lower[1] + spacing * positions[1], indexing="ij")
         nodes = np.column_stack([gx.ravel(), gy.ravel()])  # node (i, j) has index i * ny + j
