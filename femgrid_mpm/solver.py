@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import functools
 import time as clock
-from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -32,38 +31,13 @@ from .engines import engine_for
 from .grid import Grid
 from .mass import CellMasses, MassModel, SingularMassError, build_mass_model
 from .materials import make_material
-from .particles import Particles, seed_bodies, warn_of_overlaps, warn_of_thin_bodies
+from .particles import seed_bodies, warn_of_overlaps, warn_of_thin_bodies
+from .result import RunResult
 from .scene import Scene
 from .scene.limits import run_steps
 from .stability import critical_time_step
 from .state import restore_state, simulation_state
 from .step import Stage, StepContext
-
-
-@dataclass
-class RunResult:
-    """What a run produced.
-
-    Attributes
-    ----------
-    status : {"completed", "stopped"}
-    message : str
-        Why the run ended.
-    energy : dict of ndarray or None
-        Columns of :data:`femgrid_mpm.observers.COLUMNS`, one entry per record.
-    particles : Particles
-        The final (or last good) state.
-    summary : dict
-        Title, basis, mass, steps, wall time, counts, negative-mass events,
-        ``energy_drift`` (:func:`femgrid_mpm.observers.energy_drift`, None
-        without energy records).
-    """
-
-    status: str
-    message: str
-    energy: dict | None
-    particles: Particles
-    summary: dict = field(default_factory=dict)
 
 
 class Simulation:

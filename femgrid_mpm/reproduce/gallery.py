@@ -22,6 +22,7 @@ GALLERY = {
     "bar_energy_bspline3.png": ("vibrating_bar", "fig07_energy_bspline3.png"),
     "cantilever_stress.png": ("cantilever", "fig10_stress_xx.png"),
     "box_impact.png": ("box_impact", "fig17_box_height.png"),
+    "negative_masses.png": ("vibrating_bar", "negative_masses.png"),
 }
 
 
