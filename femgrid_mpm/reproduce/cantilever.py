@@ -29,6 +29,7 @@ import numpy as np
 
 from .. import beam_theory
 from ..effects import Stage
+from ..bases import BASES as REGISTRY
 from ..scene import bundled_scene
 from ..solver import Simulation
 from .plotting import legend_outside, markdown_table, save, shared_limits, styled
@@ -94,9 +95,10 @@ def received_force(simulation: Simulation) -> float:
 
 def simulate(scene_name: str, **overrides) -> BeamRun:
     scene = bundled_scene(scene_name).with_overrides(**{"solver.negative_mass": "warn", **overrides})
-    if scene.time.dt == "auto" and scene.grid.basis == "serendipity" and scene.solver.mass == "lumped":
-        # row-sum lumping has no stable step at all; the paper ran it anyway, so
-        # we take q2's step (same nodes) and let the run show what happens
+    no_stable_step = REGISTRY[scene.grid.basis].critical_step_factors.get(scene.solver.mass) == 0.0
+    if scene.time.dt == "auto" and no_stable_step:
+        # the basis declares no stable step for this mass (serendipity's row sums); the paper
+        # ran it anyway, so we take q2's step (the same nodes) and let the run show what happens
         as_q2 = Simulation(scene.with_overrides(**{"grid.basis": "q2"}))
         scene = scene.with_overrides(**{"time.dt": as_q2.dt})
     simulation, result, wall = timed_run(scene, label=f"{scene_name}, {scene.grid.basis} {scene.solver.mass}")
