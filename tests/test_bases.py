@@ -91,6 +91,26 @@ def test_serendipity_does_not_reproduce_x2y2():
     assert np.max(np.abs(N @ f(*grid.nodes.T) - f(*points.T))) > 1e-4
 
 
+def test_bspline2_quadratic_offset():
+    """Quadratic B-splines on nodes reproduce x^2 + h^2/4 (the spline's variance), exactly."""
+    grid = make_grid("bspline2")
+    points = np.vstack(list(POINT_SETS.values()))
+    N, _, _ = grid.shape_functions(points)
+    np.testing.assert_allclose(N @ grid.nodes[:, 0] ** 2, points[:, 0] ** 2 + SPACING**2 / 4, rtol=0, atol=1e-12)
+
+
+def test_bspline2_matches_the_quadratic_spline():
+    """The nine functions of a point: the products of S2 at its distances from the nodes."""
+    from femgrid_mpm.bases.bspline2 import quadratic_spline
+
+    grid = make_grid("bspline2")
+    points = random_points(60, seed=6)
+    N, _, _ = grid.shape_functions(points)
+    r = (points[:, None, :] - grid.nodes[None, :, :]) / SPACING
+    expected = quadratic_spline(r[..., 0]) * quadratic_spline(r[..., 1])
+    np.testing.assert_allclose(N.toarray(), expected, rtol=0, atol=1e-14)
+
+
 def test_bspline3_quadratic_offset():
     """Cubic B-splines on nodes reproduce x^2 + h^2/3 (Schoenberg), an exact identity."""
     grid = make_grid("bspline3")

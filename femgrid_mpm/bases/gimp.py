@@ -32,10 +32,9 @@ from types import MappingProxyType
 from typing import Mapping
 
 import numpy as np
-import skfem
 
 from .lattice import Discretization
-from .pieces import TensorPieces
+from .pieces import nearest_node_discretization
 
 
 def gimp_weight(r: np.ndarray, lam: float) -> tuple[np.ndarray, np.ndarray]:
@@ -48,25 +47,6 @@ def gimp_weight(r: np.ndarray, lam: float) -> tuple[np.ndarray, np.ndarray]:
     slope = np.where(s <= lam, -s / lam, np.where(s <= 1.0 - lam, -1.0,
                                                    np.where(s < 1.0 + lam, -(1.0 + lam - s) / (2.0 * lam), 0.0)))
     return value, slope * np.sign(r)
-
-
-def piece_tables(n_cells: int, points_per_cell: int) -> tuple[np.ndarray, np.ndarray]:
-    """The pieces along one direction of ``n_cells`` lattice cells: per piece, the monomial
-    coefficients of its three weights (shape (pieces, 3 powers, 3 functions)) and the
-    lattice index of its middle node, the node nearest to it."""
-    per_cell = 2 * points_per_cell
-    lam = 1.0 / per_cell
-    piece = np.arange(n_cells * per_cell)
-    nearest = np.floor((piece + 0.5) / per_cell + 0.5).astype(np.int64)
-    samples = np.array([0.2, 0.5, 0.8])  # inside the piece: one quadratic there, fitted exactly
-    vandermonde = np.vander(samples, 3, increasing=True)
-    position = (piece[:, None] + samples[None, :]) / per_cell  # (pieces, samples), in spacings
-    tables = np.empty((len(piece), 3, 3))
-    for a in range(3):
-        node = nearest - 1 + a
-        values, _ = gimp_weight(position - node[:, None], lam)
-        tables[:, :, a] = np.linalg.solve(vandermonde, values.T).T
-    return tables, nearest
 
 
 @dataclass(frozen=True)
@@ -91,31 +71,9 @@ class GimpBasis:
 
     def build(self, lower: np.ndarray, n_elements: tuple[int, int], spacing: float,
               points_per_cell: int = 2) -> Discretization:
-        (tables_x, nearest_x), (tables_y, nearest_y) = (piece_tables(n, points_per_cell) for n in n_elements)
-        nx, ny = n_elements[0] + 3, n_elements[1] + 3  # nodes per direction, with the ghost columns
-        ix_nodes, iy_nodes = np.meshgrid(np.arange(nx) - 1, np.arange(ny) - 1, indexing="ij")
-        nodes = np.column_stack([lower[0] + spacing * ix_nodes.ravel(), lower[1] + spacing * iy_nodes.ravel()])
-        # piece (px, py), function 3 a + b: the node nearest_x[px] - 1 + a, nearest_y[py] - 1 + b
-        # (node (i, j) of the lattice has index (i + 1) * ny + j + 1)
-        px, py = np.meshgrid(np.arange(len(tables_x)), np.arange(len(tables_y)), indexing="ij")
-        a, b = np.divmod(np.arange(9), 3)
-        connectivity = (nearest_x[px.ravel()][:, None] + a) * ny + (nearest_y[py.ravel()][:, None] + b)
-        x = lower[0] + spacing * np.arange(n_elements[0] + 1)
-        y = lower[1] + spacing * np.arange(n_elements[1] + 1)
-        return Discretization(
-            basis=self.name,
-            spacing=spacing,
-            element_width=spacing / (2 * points_per_cell),  # the pieces
-            lower=lower,
-            n_elements=(len(tables_x), len(tables_y)),
-            nodes=np.ascontiguousarray(nodes, dtype=float),
-            connectivity=np.ascontiguousarray(connectivity, dtype=np.int32),
-            local_basis=TensorPieces((tables_x, tables_y), len(tables_y)),
-            mesh=skfem.MeshQuad.init_tensor(x, y),
-            element=None,
-            nonnegative=self.nonnegative,
-            node_lattice=np.column_stack([ix_nodes.ravel(), iy_nodes.ravel()]),
-        )
+        lam = 1.0 / (2 * points_per_cell)
+        return nearest_node_discretization(self.name, lower, n_elements, spacing, 2 * points_per_cell,
+                                           lambda r: gimp_weight(r, lam)[0], self.nonnegative)
 
 
 GIMP = GimpBasis()

@@ -103,3 +103,58 @@ class TensorPieces:
                 values[sub] = powers[sub] @ others[position]
                 derivatives[sub] = slopes[sub] @ others[position]
         return values, derivatives
+
+
+def nearest_node_pieces(n_cells: int, per_spacing: int, weight) -> tuple[np.ndarray, np.ndarray]:
+    """Pieces ``1 / per_spacing`` of a spacing wide along one direction of ``n_cells`` lattice
+    cells, for a basis whose 1D function ``weight(r)`` (``r`` in spacings from its node) is one
+    quadratic on each piece and meets only the three nodes nearest to it.
+
+    Returns the monomial coefficients of each piece's three functions, shape (pieces, 3 powers,
+    3 functions), and the lattice index of each piece's middle (nearest) node.
+    """
+    piece = np.arange(n_cells * per_spacing)
+    nearest = np.floor((piece + 0.5) / per_spacing + 0.5).astype(np.int64)
+    samples = np.array([0.2, 0.5, 0.8])  # inside the piece: one quadratic there, fitted exactly
+    vandermonde = np.vander(samples, 3, increasing=True)
+    position = (piece[:, None] + samples[None, :]) / per_spacing  # (pieces, samples), in spacings
+    tables = np.empty((len(piece), 3, 3))
+    for a in range(3):
+        values = weight(position - (nearest - 1 + a)[:, None])
+        tables[:, :, a] = np.linalg.solve(vandermonde, values.T).T
+    return tables, nearest
+
+
+def nearest_node_discretization(name: str, lower: np.ndarray, n_elements: tuple[int, int], spacing: float,
+                                per_spacing: int, weight, nonnegative: bool):
+    """A tensor-product basis of :func:`nearest_node_pieces` on the node lattice, with one
+    column (row) of nodes beyond each side of the domain (a point near the edge meets it)."""
+    import skfem
+
+    from .lattice import Discretization
+
+    (tables_x, nearest_x), (tables_y, nearest_y) = (nearest_node_pieces(n, per_spacing, weight) for n in n_elements)
+    nx, ny = n_elements[0] + 3, n_elements[1] + 3  # nodes per direction, with the ghost columns
+    ix_nodes, iy_nodes = np.meshgrid(np.arange(nx) - 1, np.arange(ny) - 1, indexing="ij")
+    nodes = np.column_stack([lower[0] + spacing * ix_nodes.ravel(), lower[1] + spacing * iy_nodes.ravel()])
+    # piece (px, py), function 3 a + b: the node nearest_x[px] - 1 + a, nearest_y[py] - 1 + b
+    # (node (i, j) of the lattice has index (i + 1) * ny + j + 1)
+    px, py = np.meshgrid(np.arange(len(tables_x)), np.arange(len(tables_y)), indexing="ij")
+    a, b = np.divmod(np.arange(9), 3)
+    connectivity = (nearest_x[px.ravel()][:, None] + a) * ny + (nearest_y[py.ravel()][:, None] + b)
+    x = lower[0] + spacing * np.arange(n_elements[0] + 1)
+    y = lower[1] + spacing * np.arange(n_elements[1] + 1)
+    return Discretization(
+        basis=name,
+        spacing=spacing,
+        element_width=spacing / per_spacing,  # the pieces
+        lower=lower,
+        n_elements=(len(tables_x), len(tables_y)),
+        nodes=np.ascontiguousarray(nodes, dtype=float),
+        connectivity=np.ascontiguousarray(connectivity, dtype=np.int32),
+        local_basis=TensorPieces((tables_x, tables_y), len(tables_y)),
+        mesh=skfem.MeshQuad.init_tensor(x, y),
+        element=None,
+        nonnegative=nonnegative,
+        node_lattice=np.column_stack([ix_nodes.ravel(), iy_nodes.ravel()]),
+    )
