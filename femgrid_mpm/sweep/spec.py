@@ -150,8 +150,9 @@ def read_sweep(path) -> SweepSpec:
                                  f"(got {type(value).__name__})")
             first = seen.setdefault(normal_value(value), index)
             if first != index:
-                raise SweepError(f"{path}: {_location(('vary', key, index))}: {_shown(value)} is already in the list "
-                                 f"(as {_shown(values[first])})")
+                spelled_as = "" if _shown(values[first]) == _shown(value) else f" (as {_shown(values[first])})"
+                raise SweepError(f"{path}: {_location(('vary', key, index))}: {_shown(value)} is already in the "
+                                 f"list{spelled_as}")
     return spec
 
 
