@@ -35,6 +35,15 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message):
         self.exit(EXIT_BAD_INPUT, f"{PROG}: error: {message} (see {self.prog} --help)\n")
 
+    def _print_message(self, message, file=None):
+        # argparse ignores a failed write; the help or version on a full stdout is exit 1
+        # (main catches the OSError; a closed pipe ends quietly)
+        if message and file is sys.stdout:
+            file.write(message)
+            file.flush()
+        else:
+            super()._print_message(message, file)
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``femgrid-mpm run | resume | info | plot | reproduce | sweep | report``."""
@@ -89,7 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--gallery", metavar="DIR", help="also copy the README's gallery figures of the cases run into DIR "
                            "(femgrid_mpm.reproduce.gallery.GALLERY)")
 
-    from .sweep import default_workers, workers_count
+    from .sweep import default_workers, scheduler_address, workers_count
 
     sweep = commands.add_parser("sweep", help="run a scene over the product of the values of some keys (a sweep file), "
                                 "on Dask, and write runs.csv and the report")
@@ -98,8 +107,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "into it computes only the runs missing)")
     sweep.add_argument("--workers", type=workers_count, default=default_workers(), metavar="N",
                        help="runs at once on a local Dask cluster (default: the number of cores, here "
-                       f"{default_workers()}; 1 for timing-grade wall times)")
-    sweep.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run on an existing Dask cluster instead "
+                       f"{default_workers()}; at most the runs missing; 1 for timing-grade wall times)")
+    sweep.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT", help="run on an existing Dask cluster instead "
                        "(its workers must see DIR and the scene file at the same paths)")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar (it is shown only when stderr is a terminal)")
 

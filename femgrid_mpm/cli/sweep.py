@@ -13,7 +13,8 @@ import os
 import sys
 from pathlib import Path
 
-from .parser import EXIT_BAD_INPUT, EXIT_DONE, EXIT_INTERRUPTED, EXIT_WRITE_FAILED, BadInput, output_directory, say
+from .parser import (EXIT_BAD_INPUT, EXIT_DONE, EXIT_INTERRUPTED, EXIT_WRITE_FAILED, BadInput, StdoutFailed, emit,
+                     output_directory, say)
 
 #: the sweep file as given, kept beside its runs (the report reads its [report] table)
 SWEEP_COPY = "sweep.toml"
@@ -22,8 +23,10 @@ SWEEP_COPY = "sweep.toml"
 def sweep(args) -> int:
     """Run the sweep file ``args.sweep`` into ``--out``; see the module's docstring for the exit codes."""
     from ..output import atomic_write
+    from ..reading import read_regular_file
     from ..sweep import SweepError, plan, read_sweep, run_sweep
-    from ..sweep.spec import sweep_path
+    from ..sweep.runner import SweepBusy
+    from ..sweep.spec import scene_file, sweep_path
 
     path = sweep_path(args.sweep)
     try:
@@ -33,9 +36,10 @@ def sweep(args) -> int:
         raise BadInput(str(error)) from None
     out = output_directory(args.out)
     try:
-        source = path.read_bytes()
+        source = read_regular_file(path)
     except OSError as error:
         raise BadInput(f"{path}: cannot be read: {error.strerror or error}") from None
+    refuse_inputs_as_outputs(out, {"sweep file given": path, "sweep's scene file": scene_file(spec, path)})
     writable(out)
 
     def prepare() -> None:
@@ -45,6 +49,9 @@ def sweep(args) -> int:
     bar = SweepBar(enabled=not args.no_progress and sys.stderr.isatty())
     try:
         counts = run_sweep(runs, out, workers=args.workers, scheduler=args.scheduler, progress=bar, prepare=prepare)
+    except SweepBusy as error:
+        bar.close()
+        raise BadInput(str(error)) from None
     except KeyboardInterrupt:
         bar.close()
         say("interrupted", f"the finished runs are kept in {out} (runs.csv); run the sweep again to compute the rest")
@@ -57,15 +64,60 @@ def sweep(args) -> int:
         return EXIT_WRITE_FAILED
     bar.close()
     at_once = f" ({counts.workers} at once)" if counts.computed or counts.failed else ""
-    print(f"{len(runs)} runs: {counts.computed} computed{at_once}, {counts.reused} reused, {counts.failed} failed; "
-          f"runs.csv in {out}")
-    written = write_report(out)
+    stdout_failed = None
+    try:  # the runs are finished: a stdout that cannot take this line does not stop the report
+        emit(f"{len(runs)} runs: {counts.computed} computed{at_once}, {counts.reused} reused, {counts.failed} failed; "
+             f"runs.csv in {out}")
+    except StdoutFailed as error:
+        stdout_failed = error
+    written = write_report(out, quiet=stdout_failed is not None)
     if written != EXIT_DONE:
         return written
     if counts.failed:
         say("error", f"{counts.failed} run(s) could not run: their reason is in {out / 'runs.csv'}")
         return EXIT_BAD_INPUT
+    if stdout_failed is not None:
+        raise stdout_failed
     return EXIT_DONE
+
+
+def refuse_inputs_as_outputs(out: Path, inputs: dict[str, Path]) -> None:
+    """Raise :class:`BadInput` if the sweep into ``out`` would write over, replace or remove one of
+    its ``inputs`` (the sweep file, the scene file): one named like a file the sweep writes in
+    ``out`` (symbolic and hard links resolved with ``os.path.samefile``), or any file under
+    ``out/runs/``, where runs are replaced and temporaries removed.  Touches no file."""
+    from ..output import _same_file
+    from ..sweep import RUNS_FILE
+    from ..sweep.report import FIGURES, HTML_FILE, REPORT_FILE
+    from ..sweep.runner import RUNS_DIRECTORY
+
+    written = [out / name for name in (RUNS_FILE, REPORT_FILE, HTML_FILE, SWEEP_COPY, *FIGURES.values())]
+    for what, source in inputs.items():
+        for path in written:
+            if _same_file(source, path):
+                raise BadInput(f"--out {out}: {path} is the {what} ({source}): the sweep would write over it; "
+                               "give another --out directory")
+    runs = out / RUNS_DIRECTORY
+    if not runs.is_dir():
+        return
+    identities = {}
+    for what, source in inputs.items():
+        try:
+            status = os.stat(source)
+        except OSError:
+            continue
+        identities[(status.st_dev, status.st_ino)] = (what, source)
+    for root, directories, files in os.walk(runs):
+        for name in files:
+            place = Path(root) / name
+            try:
+                status = os.lstat(place)
+            except OSError:
+                continue
+            if (status.st_dev, status.st_ino) in identities:
+                what, source = identities[(status.st_dev, status.st_ino)]
+                raise BadInput(f"--out {out}: {place} is the {what} ({source}): it is under {runs}, where the sweep "
+                               "replaces runs and removes their temporaries; give another --out directory")
 
 
 def writable(out: Path) -> None:
@@ -88,8 +140,9 @@ def report(args) -> int:
     return write_report(directory)
 
 
-def write_report(directory: Path) -> int:
-    """The report of the sweep in ``directory``; its exit code (a runs.csv that does not read is bad input)."""
+def write_report(directory: Path, quiet: bool = False) -> int:
+    """The report of the sweep in ``directory``; its exit code (a runs.csv that does not read is bad
+    input); its line on stdout unless ``quiet`` (raising :class:`StdoutFailed` if it cannot be written)."""
     from ..sweep.report import write_report as write
 
     try:
@@ -99,25 +152,53 @@ def write_report(directory: Path) -> int:
     except OSError as error:
         say("error", f"cannot write the report in {directory}: {error}")
         return EXIT_WRITE_FAILED
-    print(f"report: {path}")
+    if not quiet:
+        emit(f"report: {path}")
     return EXIT_DONE
 
 
 def workers_count(text: str) -> int:
-    """``--workers N``: at least 1."""
+    """``--workers N``: from 1 to :data:`~femgrid_mpm.sweep.runner.MAX_WORKERS`."""
     import argparse
+
+    from ..sweep.runner import MAX_WORKERS
 
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a whole number of workers, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1 (got {value})")
+    if not 1 <= value <= MAX_WORKERS:
+        raise argparse.ArgumentTypeError(f"must be from 1 to {MAX_WORKERS} (got {value})")
     return value
 
 
+#: the protocols of a Dask scheduler's address reachable from another machine
+SCHEDULER_PROTOCOLS = ("tcp", "tls")
+
+
+def scheduler_address(text: str) -> str:
+    """``--scheduler tcp://HOST:PORT``: a protocol, a host and a port from 1 to 65535 (checked
+    at once: Dask would try a malformed address for its whole time-out)."""
+    import argparse
+    from urllib.parse import urlsplit
+
+    expected = f"expected tcp://HOST:PORT, got {text!r}"
+    try:
+        parts = urlsplit(text)
+        port = parts.port
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(f"{expected} ({error})") from None
+    if parts.scheme not in SCHEDULER_PROTOCOLS or not parts.hostname:
+        raise argparse.ArgumentTypeError(f"{expected} (protocol {', '.join(SCHEDULER_PROTOCOLS)})")
+    if port is None or not 1 <= port <= 65535 or parts.path not in ("", "/") or parts.query or parts.fragment:
+        raise argparse.ArgumentTypeError(f"{expected} (a port from 1 to 65535, nothing after it)")
+    return text
+
+
 def default_workers() -> int:
-    return os.cpu_count() or 1
+    from ..sweep.runner import MAX_WORKERS
+
+    return min(os.cpu_count() or 1, MAX_WORKERS)
 
 
 class SweepBar:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import base64
 import html
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -138,7 +139,9 @@ def compose(report: Report, directory: Path, varied: list[str], rows: list[dict]
     """The report's sections, drawing their figures into ``directory``."""
     error = spec.error
     ended = [r for r in rows if r["status"] in ("completed", "stopped")]
-    measured = [r for r in ended if r[error] is not None and r["wall_time"] is not None]
+    # on log axes: a finite error and a wall time above 0 (a run stopped at once may have neither)
+    measured = [r for r in ended if r[error] is not None and math.isfinite(r[error])
+                and r["wall_time"] is not None and r["wall_time"] > 0]
     workers = sorted({int(r["workers"]) for r in rows if r["workers"] is not None})
     counts = {status: sum(r["status"] == status for r in rows) for status in ("completed", "stopped", "failed")}
     values = "; ".join(f"{key}: {', '.join(dict.fromkeys(r[key] for r in rows))}" for key in varied)
@@ -150,10 +153,15 @@ def compose(report: Report, directory: Path, varied: list[str], rows: list[dict]
         "sharing cores slow each other: `--workers 1` gives timing-grade numbers. "
         + ("The error is the RMS over the points of |u - u_exact| over the largest |u_exact| over the run, "
            + ("its largest value over the records (error_max)." if error == "error_max" else "at the end (error_end).")))
-    if not measured:
+    if not ended:
+        report.paragraph("No run finished: there is no error and no cost to compare.")
+    elif not any(r[error] is not None for r in ended):
         report.paragraph(f"No run has a {error}: the scene declares no [reference], so there is nothing to compare "
                          "against; below is what the runs cost.")
-    else:
+    elif not measured:
+        report.paragraph(f"No finished run has a finite {error} and a wall time above 0: there is nothing to compare; "
+                         "below is what the runs cost.")
+    if measured:
         answer(report, measured, varied, spec)
         work_precision(report, directory, measured, varied, error)
         convergence(report, directory, measured, varied, error)
@@ -278,7 +286,7 @@ def time_steps(report: Report, directory: Path, rows, varied, error) -> None:
 
 
 def cost_split(report: Report, directory: Path, rows, varied) -> None:
-    timed = [r for r in rows if r["wall_time"] is not None and r["steps"]]
+    timed = [r for r in rows if r["wall_time"] is not None and r["wall_time"] > 0 and r["steps"]]
     if not timed:
         return
     lines = lines_over(timed, varied, "spacing", lambda r: step_setting(r, varied))

@@ -30,6 +30,44 @@ RUNS_DIRECTORY = "runs"
 MARKER_FILE = "sweep_run.json"
 #: a run's directory while it runs: ``.KEY.PID.tmp``, beside its final place
 TEMPORARY_SUFFIX = ".tmp"
+#: the most processes of a local cluster (each a Python with numba, ~200 MB): more is a typo
+MAX_WORKERS = 256
+
+
+class SweepBusy(OSError):
+    """Another sweep is running into the same directory; the message is one line."""
+
+
+class SweepLock:
+    """An exclusive lock on a sweep's directory (``flock`` on the directory itself, so that
+    no file is left behind), held from the first write to the end of the sweep: two sweeps
+    into one directory would replace each other's runs and ``runs.csv``."""
+
+    def __init__(self, directory: Path):
+        self.directory = Path(directory)
+        self.descriptor: int | None = None
+
+    def acquire(self) -> None:
+        """Lock the directory (it must exist); raises :class:`SweepBusy` if another process holds it."""
+        import fcntl
+
+        if self.descriptor is not None:
+            return
+        descriptor = os.open(self.directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | os.O_CLOEXEC)
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(descriptor)
+            raise SweepBusy(f"another sweep is running in {self.directory} (wait for it, or give another --out)") from None
+        except OSError:  # a file system without locks: nothing to hold
+            os.close(descriptor)
+            return
+        self.descriptor = descriptor
+
+    def release(self) -> None:
+        if self.descriptor is not None:
+            os.close(self.descriptor)  # closing the descriptor releases the lock
+            self.descriptor = None
 
 
 class SweepProgress(Protocol):
@@ -169,11 +207,26 @@ def _replace_directory(source: Path, target: Path) -> None:
 
 
 def remove_stale(runs_directory: Path) -> None:
-    """Remove the temporary directories of runs a killed sweep left (``.KEY.PID.tmp``, ``.KEY.PID.old``)."""
+    """Remove the temporary directories of runs a killed sweep left (``.KEY.PID.tmp``,
+    ``.KEY.PID.old``); one whose process is alive on this machine is left alone."""
     if runs_directory.is_dir():
         for entry in runs_directory.iterdir():
             if entry.name.startswith(".") and entry.name.endswith((TEMPORARY_SUFFIX, ".old")) and entry.is_dir():
-                shutil.rmtree(entry, ignore_errors=True)
+                if not process_alive(entry.name.rsplit(".", 2)[-2]):
+                    shutil.rmtree(entry, ignore_errors=True)
+
+
+def process_alive(pid_text: str) -> bool:
+    """Whether the process of this id (the text of a temporary's name) runs on this machine."""
+    if not pid_text.isdigit() or not 0 < int(pid_text) < 2**31:
+        return False
+    try:
+        os.kill(int(pid_text), 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # it exists, owned by another user
+        return True
+    return True
 
 
 def run_sweep(planned_runs: list, out: Path, *, workers: int | None = None, scheduler: str | None = None,
@@ -186,7 +239,8 @@ def run_sweep(planned_runs: list, out: Path, *, workers: int | None = None, sche
     out : Path
         The sweep's directory.
     workers : int, optional
-        Runs at once on a local cluster (default: the number of cores).
+        Runs at once on a local cluster (default: the number of cores), at most
+        :data:`MAX_WORKERS` and the number of runs missing.
     scheduler : str, optional
         An existing Dask scheduler (``tcp://HOST:PORT``); its workers must see ``out``
         and the scene file at the same paths.
@@ -198,11 +252,22 @@ def run_sweep(planned_runs: list, out: Path, *, workers: int | None = None, sche
     Raises
     ------
     OSError
-        If a scheduler cannot be reached, or ``out`` cannot be written.
+        If a scheduler cannot be reached, or ``out`` cannot be written;
+        :class:`SweepBusy` if another sweep holds ``out`` (:class:`SweepLock`).
     KeyboardInterrupt
         After closing the cluster; the finished runs and ``runs.csv`` are kept.
     """
     out = Path(out)
+    lock = SweepLock(out)
+    if out.is_dir():  # refused before a cluster is started
+        lock.acquire()
+    try:
+        return _run_locked(planned_runs, out, lock, workers, scheduler, progress, prepare)
+    finally:
+        lock.release()
+
+
+def _run_locked(planned_runs, out: Path, lock: SweepLock, workers, scheduler, progress, prepare) -> SweepCounts:
     runs_directory = out / RUNS_DIRECTORY
     varied = list(planned_runs[0].varied) if planned_runs else []
     digests = {planned.key: run_digest(planned) for planned in planned_runs}
@@ -219,6 +284,8 @@ def run_sweep(planned_runs: list, out: Path, *, workers: int | None = None, sche
         write_runs(out / RUNS_FILE, varied, [rows[p.key] for p in planned_runs if p.key in rows])
 
     def start() -> None:
+        out.mkdir(parents=True, exist_ok=True)
+        lock.acquire()
         if prepare is not None:
             prepare()
         runs_directory.mkdir(parents=True, exist_ok=True)
@@ -231,7 +298,8 @@ def run_sweep(planned_runs: list, out: Path, *, workers: int | None = None, sche
         if progress is not None:
             progress.started(len(planned_runs), len(rows), [])
         return counts
-    with _dask_client(workers, scheduler) as (client, concurrency):
+    # no more processes than runs to compute
+    with _dask_client(min(workers or os.cpu_count() or 1, MAX_WORKERS, len(missing)), scheduler) as (client, concurrency):
         from dask.distributed import as_completed
 
         start()
@@ -278,11 +346,15 @@ class _dask_client:
         self.workers = workers or os.cpu_count() or 1
         self.scheduler = scheduler
         self.cluster = self.client = None
+        self.logger_level: int | None = None
 
     def __enter__(self):
         from dask.distributed import Client, LocalCluster
 
         if self.scheduler:
+            # the client's own logs (a lost connection, a retry) stay off stderr as the cluster's do
+            self.logger_level = logging.getLogger("distributed").level
+            logging.getLogger("distributed").setLevel(logging.CRITICAL + 10)
             try:
                 self.client = Client(self.scheduler, timeout="10s", set_as_default=False)
             except (OSError, TimeoutError) as error:
@@ -290,9 +362,12 @@ class _dask_client:
             concurrency = max(1, sum(self.client.nthreads().values()))
         else:
             # one BLAS thread per worker: runs share the cores already
+            # no dashboard; its HTTP server (health checks) on a free port, not 8787 with a
+            # warning when that is taken; no log of the cluster's on stderr (a run's failure
+            # is its row in runs.csv)
             self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                        dashboard_address=None, silence_logs=logging.ERROR,
-                                        env={"OPENBLAS_NUM_THREADS": "1"})
+                                        dashboard_address=None, scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                                        silence_logs=logging.CRITICAL + 10, env={"OPENBLAS_NUM_THREADS": "1"})
             self.client = Client(self.cluster, set_as_default=False)
             concurrency = self.workers
         return self.client, concurrency
@@ -302,4 +377,6 @@ class _dask_client:
             self.client.close()
         if self.cluster is not None:
             self.cluster.close()
+        if self.logger_level is not None:
+            logging.getLogger("distributed").setLevel(self.logger_level)
         return False

@@ -20,9 +20,11 @@ sweep file and the key.
 
 from __future__ import annotations
 
+import collections
 import hashlib
 import itertools
 import json
+import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,6 +39,10 @@ TIME_STEP_KEYS = ("time.dt", "time.safety")
 BUNDLED_SWEEPS = Path(__file__).parent.parent / "sweeps"
 #: a run's directory name is at most this long (a longer one ends in a hash)
 MAX_KEY_LENGTH = 80
+#: the most runs a sweep plans unless its file raises ``max_runs``: planning loads and keeps
+#: every combination's scene (about a millisecond each), so a product of long lists is
+#: refused before any is loaded
+DEFAULT_MAX_RUNS = 10_000
 
 Scalar = str | int | float | bool
 
@@ -60,6 +66,7 @@ class SweepSpec(BaseModel):
     title: str = ""
     scene: Annotated[str, Field(min_length=1)]
     particles: bool = False
+    max_runs: Annotated[int, Field(ge=1)] = DEFAULT_MAX_RUNS
     vary: dict[str, Annotated[list[Any], Field(min_length=1)]] = {}
     set: dict[str, Any] = {}
     report: ReportSpec = ReportSpec()
@@ -91,35 +98,78 @@ def sweep_path(text: str) -> Path:
 
 
 def read_sweep(path) -> SweepSpec:
-    """The sweep file at ``path``, checked; raises :class:`SweepError`."""
+    """The sweep file at ``path``, checked; raises :class:`SweepError`.
+
+    Only a regular file of at most :data:`~femgrid_mpm.reading.MAX_SCENE_BYTES` is read
+    (a FIFO is refused without blocking), as a scene file is.  Two spellings of one key
+    (``bodies.0.x`` and ``bodies.00.x``, in ``[vary]`` or across ``[vary]`` and ``[set]``),
+    two values of a list that are one value (``2`` and ``2.0``) and more runs than
+    ``max_runs`` are refused, the last before any combination is formed.
+    """
     import tomllib
+
+    from ..reading import read_regular_file
 
     path = Path(path)
     try:
-        with path.open("rb") as handle:
-            data = tomllib.load(handle)
+        data = tomllib.loads(read_regular_file(path).decode())
     except FileNotFoundError:
         raise SweepError(f"{path}: no such sweep file") from None
     except IsADirectoryError:
         raise SweepError(f"{path}: is a directory, not a sweep file") from None
     except tomllib.TOMLDecodeError as error:
         raise SweepError(_one_line(f"{path}: not valid TOML: {error}")) from None
-    except (OSError, UnicodeDecodeError) as error:
+    except RecursionError:
+        raise SweepError(f"{path}: not valid TOML for a sweep file: nested too deeply for the TOML reader") from None
+    except OSError as error:
+        raise SweepError(_one_line(f"{path}: cannot be read: {error.strerror or error}")) from None
+    except UnicodeDecodeError as error:
         raise SweepError(_one_line(f"{path}: cannot be read: {error}")) from None
     try:
         spec = SweepSpec.model_validate(data)
     except ValidationError as error:
         raise SweepError(_one_line(f"{path}: {_describe(error)}")) from None
+    runs = math.prod(len(values) for values in spec.vary.values())
+    if runs > spec.max_runs:
+        sizes = " x ".join(str(len(values)) for values in spec.vary.values())
+        raise SweepError(f"{path}: vary: {runs} runs ({sizes}), more than max_runs = {spec.max_runs} "
+                         "(raise it in the sweep file: max_runs = N)")
+    spelled: dict[str, tuple] = {}
+    for table in ("vary", "set"):
+        for key in getattr(spec, table):
+            other = spelled.setdefault(normal_key(key), (table, key))
+            if other != (table, key):
+                same = "is also in [vary] (set a key in one of them)" if other[1] == key else \
+                    f"is the key {_location(other)} spelled differently"
+                raise SweepError(f"{path}: {_location((table, key))}: {same}")
     for key, values in spec.vary.items():
+        seen: dict = {}
         for index, value in enumerate(values):
             if not isinstance(value, Scalar):
                 raise SweepError(f"{path}: {_location(('vary', key, index))}: must be a string, a number or true/false "
                                  f"(got {type(value).__name__})")
-            if any(_same(value, other) for other in values[:index]):
-                raise SweepError(f"{path}: {_location(('vary', key, index))}: {_shown(value)} is already in the list")
-        if key in spec.set:
-            raise SweepError(f"{path}: {_location(('set', key))}: is also in [vary] (set a key in one of them)")
+            first = seen.setdefault(normal_value(value), index)
+            if first != index:
+                spelled_as = "" if _shown(values[first]) == _shown(value) else f" (as {_shown(values[first])})"
+                raise SweepError(f"{path}: {_location(('vary', key, index))}: {_shown(value)} is already in the "
+                                 f"list{spelled_as}")
     return spec
+
+
+def normal_key(key: str) -> str:
+    """A dotted key as the scene reads it: list indices as numbers (``bodies.00.x`` is ``bodies.0.x``)."""
+    return ".".join(str(int(part)) if part.isdigit() else part for part in key.split("."))
+
+
+def normal_value(value: Scalar) -> tuple:
+    """What a varied value is to the scene: ``2`` and ``2.0`` are one number; ``true`` is no number."""
+    if isinstance(value, bool):
+        return ("bool", value)
+    if isinstance(value, float) and value.is_integer():
+        return ("number", int(value))
+    if isinstance(value, (int, float)):
+        return ("number", value)
+    return ("text", value)
 
 
 def scene_file(spec: SweepSpec, sweep_path) -> Path:
@@ -150,9 +200,17 @@ def plan(spec: SweepSpec, sweep_path) -> list[PlannedRun]:
     """
     from ..scene import SceneError, load_scene
 
+    from ..reading import read_regular_file
+
     path = scene_file(spec, sweep_path)
-    if not path.is_file():
-        raise SweepError(f"{sweep_path}: scene: no such scene file {str(path)!r}")
+    try:  # the scene file's own problem (a FIFO, a directory), named before any override
+        read_regular_file(path)
+    except FileNotFoundError:
+        raise SweepError(f"{sweep_path}: scene: no such scene file {str(path)!r}") from None
+    except IsADirectoryError:
+        raise SweepError(f"{sweep_path}: scene: {str(path)!r} is a directory, not a scene file") from None
+    except OSError as error:
+        raise SweepError(f"{sweep_path}: scene: {str(path)!r} cannot be read: {error.strerror or error}") from None
     path = path.absolute()
     try:
         base = load_scene(path, spec.set)
@@ -187,9 +245,10 @@ def run_keys(combinations: list[dict]) -> list[str]:
     ['run']
     """
     slugs = ["-".join(_slug(value) for value in varied.values()) or "run" for varied in combinations]
+    taken = collections.Counter(slugs)
     names = []
     for slug, varied in zip(slugs, combinations):
-        if len(slug) > MAX_KEY_LENGTH or slugs.count(slug) > 1:
+        if len(slug) > MAX_KEY_LENGTH or taken[slug] > 1:
             digest = hashlib.sha256(json.dumps(varied, sort_keys=True).encode()).hexdigest()[:8]
             slug = f"{slug[: MAX_KEY_LENGTH - 9]}-{digest}"
         names.append(slug)
@@ -204,10 +263,6 @@ def _slug(value: Scalar) -> str:
     else:
         text = str(value)
     return re.sub(r"[^a-z0-9.+]", "_", text.lower()).strip(".") or "_"
-
-
-def _same(a, b) -> bool:
-    return type(a) is type(b) and a == b
 
 
 def _shown(value) -> str:

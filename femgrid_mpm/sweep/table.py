@@ -82,28 +82,93 @@ def write_runs(path: Path, varied: list[str], rows: list[dict]) -> None:
     atomic_write(Path(path), buffer.getvalue())
 
 
+#: the largest runs.csv read (a row is about 300 bytes: a million runs)
+MAX_RUNS_BYTES = 2**30
+STATUSES = ("completed", "stopped", "failed")
+#: what a number of a column must be: > 0 (finite), a whole number >= 0, >= 0; the others finite
+POSITIVE_COLUMNS = ("dt", "spacing", "workers")
+COUNT_COLUMNS = ("steps", "points", "nodes")
+#: may be non-finite in a run that did not complete (a state that blew up); never negative
+ERROR_COLUMNS = ("error_end", "error_max", "cg_iterations")
+#: the critical step is infinite or not positive when no step is stable or none is limited;
+#: a drift or a period's error of either sign, non-finite when the energy or the period is 0
+FREE_COLUMNS = ("critical_dt", "period_error", "energy_drift")
+
+
 def read_runs(path: Path) -> tuple[list[str], list[dict]]:
     """The varied keys and the rows of a ``runs.csv``, numbers as floats (None where empty).
 
     Raises
     ------
     ValueError
-        If the file is not a sweep's ``runs.csv``.
+        One line naming the file and the line: not a sweep's ``runs.csv`` (its columns), not
+        UTF-8 text, a row of the wrong number of fields, an unknown status, a number that does
+        not read or is out of its range (a wall time or a spacing that is not positive and
+        finite, a count that is not a whole number).
+        One that cannot be read too (a FIFO or a device is refused unread, as a scene file).
     """
-    with Path(path).open(newline="") as handle:
-        reader = csv.DictReader(handle)
-        header = list(reader.fieldnames or [])
+    from ..reading import read_regular_file
+
+    path = Path(path)
+    try:
+        data = read_regular_file(path, MAX_RUNS_BYTES)
+    except OSError as error:
+        raise ValueError(f"{path}: cannot be read: {error.strerror or error}") from None
+    try:
+        content = data.decode()
+    except UnicodeDecodeError as error:
+        line = data[: error.start].count(b"\n") + 1
+        raise ValueError(f"{path}: line {line}: not UTF-8 text (byte {data[error.start]:#04x})") from None
+    reader = csv.reader(io.StringIO(content, newline=""))
+    try:
+        header = next(reader, [])
         if "status" not in header or any(column not in header for column in RESULT_COLUMNS + DESCRIPTION_COLUMNS):
-            raise ValueError(f"{path}: not a sweep's runs.csv (its columns: {', '.join(header) or 'none'})")
+            shown = ", ".join(header)[:200] or "none"
+            raise ValueError(f"{path}: not a sweep's runs.csv (its columns: {shown})")
         varied = header[: header.index("status")]
-        rows = []
-        for line, record in enumerate(reader, start=2):
-            parsed = dict(record)
-            for column in NUMBER_COLUMNS:
-                cell = record[column]
-                try:
-                    parsed[column] = float(cell) if cell not in ("", None) else None
-                except ValueError:
-                    raise ValueError(f"{path}: line {line}: {column}: not a number ({cell!r})") from None
-            rows.append(parsed)
+        rows = [parsed_row(path, reader.line_num, header, record) for record in reader if record]
+    except csv.Error as error:
+        raise ValueError(f"{path}: line {reader.line_num}: not CSV: {error}") from None
     return varied, rows
+
+
+def parsed_row(path: Path, line: int, header: list[str], record: list[str]) -> dict:
+    """One row of ``runs.csv`` as a dict, numbers as floats, checked (see :func:`read_runs`)."""
+    if len(record) != len(header):
+        raise ValueError(f"{path}: line {line}: has {len(record)} fields, expected {len(header)}")
+    parsed = dict(zip(header, record))
+    if parsed["status"] not in STATUSES:
+        raise ValueError(f"{path}: line {line}: status: {parsed['status'][:40]!r} is not one of {', '.join(STATUSES)}")
+    for column in NUMBER_COLUMNS:
+        cell = parsed[column]
+        if cell == "":
+            parsed[column] = None
+            continue
+        try:
+            value = float(cell)
+        except ValueError:
+            raise ValueError(f"{path}: line {line}: {column}: not a number ({cell[:40]!r})") from None
+        problem = number_problem(column, value, parsed["status"])
+        if problem:
+            raise ValueError(f"{path}: line {line}: {column}: {problem} (got {cell[:40]})")
+        parsed[column] = value
+    return parsed
+
+
+def number_problem(column: str, value: float, status: str) -> str | None:
+    """What is wrong with ``value`` in ``column`` of a row of ``status``, or None."""
+    if column in FREE_COLUMNS:
+        return None if not math.isnan(value) else "must be a number"
+    if column in ERROR_COLUMNS:
+        if math.isnan(value) or math.isinf(value):
+            return None if status != "completed" else "must be finite in a completed run"
+        return "must not be negative" if value < 0 else None
+    if not math.isfinite(value):
+        return "must be finite"
+    if (column in POSITIVE_COLUMNS or (column == "wall_time" and status == "completed")) and value <= 0:
+        return "must be positive"
+    if column == "wall_time" and value < 0:
+        return "must not be negative"
+    if column in COUNT_COLUMNS and (value < 0 or not value.is_integer()):
+        return "must be a whole number, at least 0"
+    return None
