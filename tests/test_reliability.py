@@ -514,3 +514,58 @@ def test_a_resume_whose_particles_is_a_file_is_refused_before_writing(tmp_path, 
     assert code == cli.EXIT_BAD_INPUT
     one_line_error(err, "particles: is not a directory")
     assert snapshot(out) == before
+
+
+def wait_for(path: Path, process, timeout=120.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not path.exists():
+        assert process.poll() is None and time.monotonic() < deadline, process.stderr.read().decode()
+        time.sleep(0.05)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_sigterm_and_sighup_end_a_reproduction_as_sigint_does(tmp_path, signum):
+    """The cantilever's case runs for minutes: the signal falls inside it."""
+    out = tmp_path / "paper"
+    process = cli_process("reproduce", "--case", "cantilever", "--out", out)
+    try:
+        wait_for(out / "cantilever", process)
+        time.sleep(1.0)
+        process.send_signal(signum)
+        code = process.wait(timeout=120)
+    finally:
+        process.kill()
+    err = process.stderr.read().decode()
+    assert code == 128 + signum, err
+    assert "Traceback" not in err and "leaked" not in err
+    name = signal.Signals(signum).name
+    assert err.splitlines()[-1] == f"femgrid-mpm: interrupted: in case cantilever by {name}; no case finished"
+
+
+def test_sigterm_ends_a_sweep_as_sigint_does(tmp_path):
+    """Three runs, one worker: the signal comes while the first runs; exit 143, its line."""
+    (tmp_path / "bar.toml").write_text(BLOCK.replace("end = 0.2", "end = 500.0"))
+    sweep_file = tmp_path / "sweep.toml"
+    sweep_file.write_text('scene = "bar.toml"\n[vary]\n"time.end" = [400.0, 401.0, 402.0]\n')
+    out = tmp_path / "out"
+    process = cli_process("sweep", sweep_file, "--out", out, "--workers", "1", "--no-progress")
+    try:
+        wait_for(out / "sweep.toml", process)
+        time.sleep(2.0)
+        process.send_signal(signal.SIGTERM)
+        code = process.wait(timeout=120)
+    finally:
+        process.kill()
+    err = process.stderr.read().decode()
+    assert code == cli.EXIT_TERMINATED == 143, err
+    assert "Traceback" not in err and "leaked" not in err
+    assert err.splitlines()[-1].startswith("femgrid-mpm: interrupted: the finished runs are kept in ")
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["sweep", "--help"], ["--version"]])
+def test_help_on_a_full_device_is_exit_1_in_one_line(argv):
+    with open("/dev/full", "w") as full:
+        process = cli_process(*argv, stdout=full)
+        err = process.communicate(timeout=120)[1].decode()
+    assert process.returncode == cli.EXIT_WRITE_FAILED
+    assert err.splitlines() == ["femgrid-mpm: error: cannot write to standard output: No space left on device"]

@@ -35,6 +35,18 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message):
         self.exit(EXIT_BAD_INPUT, f"{PROG}: error: {message} (see {self.prog} --help)\n")
 
+    def _print_message(self, message, file=None):
+        # argparse drops a failed write: --help or --version into a full disk would exit 0
+        # with nothing written; on stdout it raises (exit 1, or a closed pipe's quiet 0)
+        if message:
+            file = file or sys.stderr
+            try:
+                file.write(message)
+                file.flush()
+            except OSError:
+                if file is sys.stdout:
+                    raise
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``femgrid-mpm run | resume | info | plot | reproduce | sweep | report``."""
