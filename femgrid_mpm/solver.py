@@ -18,6 +18,7 @@ True
 from __future__ import annotations
 
 import functools
+import math
 import time as clock
 from typing import Callable
 
@@ -125,6 +126,11 @@ class Simulation:
             raise ValueError(
                 f"dt = 'auto' is impossible: {self.scene.grid.basis} with {self.scene.solver.mass} mass has no stable time step"
             )
+        if self.critical_dt == math.inf:  # no stiffness on a free degree of freedom: nothing limits the step
+            raise ValueError(
+                "time.dt: dt = 'auto' has nothing to limit the step (an infinite critical step: every node fixed, "
+                "or a stiffness that vanishes in floating point, e.g. a spacing or a body size far from metres); "
+                "give dt in seconds")
         return time.safety * self.critical_dt
 
     @property

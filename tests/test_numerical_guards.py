@@ -170,6 +170,30 @@ def test_a_spacing_in_millimetres_warns_and_info_states_the_end_reached(run_cli,
     assert "point(s) across" in err and "exceeds time.end" in err
 
 
+@pytest.mark.parametrize("settings", [
+    ['supports=[{where = "x <= 100"}]'],  # every node fixed: no free stiffness at all
+    ["grid.spacing=1e100"],  # one cell of 1e100 m over the bar: K / M underflows
+    ["bodies.0.upper=[1e-300, 1e-300]"],  # a body of 1e-300 m: its stiffness is 0 in floating point
+])
+def test_an_infinite_auto_step_is_refused_naming_time_dt(run_cli, tmp_path, settings):
+    """Nothing limits the step (the critical step is infinite): dt = "auto" would be inf and
+    the run one step to t = inf. Refused, naming time.dt, in Python and on the command line."""
+    path = tmp_path / "bar.toml"
+    path.write_text(bundled_scene_text("vibrating_bar"))
+    settings = ["time.dt='auto'", *settings]
+    code, out, err = run_cli(["run", path, "--out", tmp_path / "out", "--no-progress",
+                              *[word for setting in settings for word in ("--set", setting)]])
+    assert code == 2 and out == "" and not (tmp_path / "out").exists()
+    assert err.splitlines() == [f"femgrid-mpm: error: {path}: time.dt: dt = 'auto' has nothing to limit the step "
+                                "(an infinite critical step: every node fixed, or a stiffness that vanishes in "
+                                "floating point, e.g. a spacing or a body size far from metres); give dt in seconds"]
+    import tomllib
+
+    changes = {key: tomllib.loads(f"v = {text}")["v"] for key, _, text in (s.partition("=") for s in settings)}
+    with pytest.raises(ValueError, match=r"^time\.dt: dt = 'auto' has nothing to limit the step"):
+        Simulation(bundled_scene("vibrating_bar").with_overrides(**changes))
+
+
 def bundled_scene_text(name: str) -> str:
     from importlib.resources import files
 
