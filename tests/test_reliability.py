@@ -569,3 +569,41 @@ def test_help_on_a_full_device_is_exit_1_in_one_line(argv):
         err = process.communicate(timeout=120)[1].decode()
     assert process.returncode == cli.EXIT_WRITE_FAILED
     assert err.splitlines() == ["femgrid-mpm: error: cannot write to standard output: No space left on device"]
+
+
+@pytest.mark.parametrize("value, name", [(3, "int"), (None, "NoneType"), (b"scene.toml", "bytes"),
+                                         (bundled_scene("vibrating_bar"), "Scene")])
+def test_load_scene_of_no_path_is_one_scene_error_line(value, name):
+    from femgrid_mpm.scene import load_scene
+
+    with pytest.raises(SceneError) as error:
+        load_scene(value)
+    assert str(error.value).startswith(f"load_scene: expected the path of a scene file (str or Path), got {name}")
+    assert "\n" not in str(error.value)
+
+
+def test_resume_of_a_file_says_it_is_a_file(capsys, block_file):
+    code, _, err = run_cli(["resume", block_file], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, f"{block_file}: is a file, not a run's directory")
+
+
+@pytest.mark.parametrize("setting, key", [("bodies.0.points_per_cell=1e300", "bodies[0].points_per_cell"),
+                                          ("time.max_steps=1e30", "time.max_steps")])
+def test_whole_numbers_beyond_64_bits_name_the_key_and_the_range(capsys, block_file, setting, key):
+    code, _, err = run_cli(["info", block_file, "--set", setting], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    line = one_line_error(err, f"{key}: must be a whole number of at most 9.22e+18 (got ")
+    assert "Unable to parse" not in line
+
+
+def test_a_long_set_value_is_echoed_cut_short(capsys, block_file):
+    """A 40,001-character expression and a 1000-item array: the line shows 80 characters
+    and 16 items and says how long they were, not 40 kB."""
+    expression = "x+" * 20000 + "1"
+    code, _, err = run_cli(["info", block_file, "--set", f'bodies.0.velocity=["{expression}", "0"]',
+                            "--set", f"grid.lower=[{', '.join(['1'] * 1000)}]"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    line = one_line_error(err, f'bodies.0.velocity = ["{expression[:80]}..." (40001 characters), "0"]',
+                          "grid.lower = [" + "1, " * 16 + "... (1000 items)]")
+    assert len(line) < 600
