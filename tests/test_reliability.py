@@ -543,10 +543,12 @@ def test_sigterm_and_sighup_end_a_reproduction_as_sigint_does(tmp_path, signum):
 
 
 def test_sigterm_ends_a_sweep_as_sigint_does(tmp_path):
-    """Three runs, one worker: the signal comes while the first runs; exit 143, its line."""
-    (tmp_path / "bar.toml").write_text(BLOCK.replace("end = 0.2", "end = 500.0"))
+    """Three runs of 1e6 steps of a block at rest (tens of seconds each), one worker: the
+    signal comes while the first runs; exit 143, its line, nothing computed in runs.csv."""
+    (tmp_path / "bar.toml").write_text(BLOCK.replace("end = 0.2", "end = 10000.0").replace("every = 5", "every = 100000")
+                                       .replace("velocity = [1.0, 0.25]", "velocity = [0.0, 0.0]"))  # at rest
     sweep_file = tmp_path / "sweep.toml"
-    sweep_file.write_text('scene = "bar.toml"\n[vary]\n"time.end" = [400.0, 401.0, 402.0]\n')
+    sweep_file.write_text('scene = "bar.toml"\n[vary]\n"time.end" = [10000.0, 10001.0, 10002.0]\n')
     out = tmp_path / "out"
     process = cli_process("sweep", sweep_file, "--out", out, "--workers", "1", "--no-progress")
     try:
@@ -560,6 +562,8 @@ def test_sigterm_ends_a_sweep_as_sigint_does(tmp_path):
     assert code == cli.EXIT_TERMINATED == 143, err
     assert "Traceback" not in err and "leaked" not in err
     assert err.splitlines()[-1].startswith("femgrid-mpm: interrupted: the finished runs are kept in ")
+    runs = out / "runs.csv"
+    assert not runs.exists() or "completed" not in runs.read_text()
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["sweep", "--help"], ["--version"]])

@@ -52,6 +52,8 @@ def main(argv: list[str] | None = None) -> int:
             code = dispatch(argv)
         except Interrupted as interrupt:  # outside a command's own handling (a run's, a sweep's)
             code = interrupted(interrupt.signum)
+        except KeyboardInterrupt:  # Python's own, where a signal is not ours to handle
+            code = interrupted(signal.SIGINT)
         if code == EXIT_INTERRUPTED and signals.received is not None:
             # a command that ends a Ctrl-C its own way (sweep) returns 130 whatever the signal
             code = HANDLED[signals.received]
