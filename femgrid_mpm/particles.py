@@ -58,8 +58,10 @@ class Particles:
 
     @property
     def volume(self) -> np.ndarray:
-        """Current volumes (m^2 per unit thickness), shape (n,)."""
-        return self.mass / self.density
+        """Current volumes (m^2 per unit thickness), shape (n,); infinite where a stopped run's
+        density has gone to 0 (without numpy's warning: the stop has said why)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.mass / self.density
 
     def body_slices(self) -> list[slice]:
         """Contiguous index range of each body (particles are stored body by body)."""

@@ -18,6 +18,7 @@ True
 from __future__ import annotations
 
 import functools
+import math
 import time as clock
 from typing import Callable
 
@@ -26,7 +27,7 @@ import numpy as np
 from .diagnostics import (EnergyGuard, NegativeMassMonitor, SimulationStopped, fastest_point, first_not_finite,
                           points_kinetic_energy, warn_of_a_long_step, warn_of_energy_drift)
 from .observers import EnergyBookkeeping, energy_drift, kinetic_energy
-from .effects.base import Recorder
+from .effects.base import ForceNotFinite, Recorder
 from .engines import engine_for
 from .grid import Grid
 from .mass import CellMasses, MassModel, SingularMassError, build_mass_model
@@ -125,6 +126,11 @@ class Simulation:
             raise ValueError(
                 f"dt = 'auto' is impossible: {self.scene.grid.basis} with {self.scene.solver.mass} mass has no stable time step"
             )
+        if self.critical_dt == math.inf:  # no stiffness on a free degree of freedom: nothing limits the step
+            raise ValueError(
+                "time.dt: dt = 'auto' has nothing to limit the step (an infinite critical step: every node fixed, "
+                "or a stiffness that vanishes in floating point, e.g. a spacing or a body size far from metres); "
+                "give dt in seconds")
         return time.safety * self.critical_dt
 
     @property
@@ -259,16 +265,20 @@ class Simulation:
         self.context.target = None
 
     def _run(self, stage: Stage) -> None:
-        for _, action in self.effects[stage]:
-            action(self.context)
+        try:
+            for _, action in self.effects[stage]:
+                action(self.context)
+        except ForceNotFinite as error:  # a declared force with no value: its key, not "the state"
+            raise self._stop(error.message(self.scene, self.particles), "not_finite") from None
 
     def _book_work(self, ctx: StepContext) -> None:
         """Work of each declared force over the step, at the mid-step grid velocity."""
         if not ctx.external:
             return
-        mid_velocity = ctx.velocity + 0.5 * self.dt * ctx.acceleration
-        for name, grid_force in ctx.external.items():
-            ctx.work[name] = ctx.work.get(name, 0.0) + self.dt * float(np.sum(grid_force * mid_velocity))
+        with np.errstate(over="ignore", invalid="ignore"):  # a work beyond 1e308: the state guard stops the run
+            mid_velocity = ctx.velocity + 0.5 * self.dt * ctx.acceleration
+            for name, grid_force in ctx.external.items():
+                ctx.work[name] = ctx.work.get(name, 0.0) + self.dt * float(np.sum(grid_force * mid_velocity))
 
     def _stop(self, message: str, reason: str) -> SimulationStopped:
         return SimulationStopped(f"step {self.step_index} (t = {self.time:.6g} s): {message}", self.step_index, self.time, reason)

@@ -170,6 +170,30 @@ def test_a_spacing_in_millimetres_warns_and_info_states_the_end_reached(run_cli,
     assert "point(s) across" in err and "exceeds time.end" in err
 
 
+@pytest.mark.parametrize("settings", [
+    ['supports=[{where = "x <= 100"}]'],  # every node fixed: no free stiffness at all
+    ["grid.spacing=1e100"],  # one cell of 1e100 m over the bar: K / M underflows
+    ["bodies.0.upper=[1e-300, 1e-300]"],  # a body of 1e-300 m: its stiffness is 0 in floating point
+])
+def test_an_infinite_auto_step_is_refused_naming_time_dt(run_cli, tmp_path, settings):
+    """Nothing limits the step (the critical step is infinite): dt = "auto" would be inf and
+    the run one step to t = inf. Refused, naming time.dt, in Python and on the command line."""
+    path = tmp_path / "bar.toml"
+    path.write_text(bundled_scene_text("vibrating_bar"))
+    settings = ["time.dt='auto'", *settings]
+    code, out, err = run_cli(["run", path, "--out", tmp_path / "out", "--no-progress",
+                              *[word for setting in settings for word in ("--set", setting)]])
+    assert code == 2 and out == "" and not (tmp_path / "out").exists()
+    assert err.splitlines() == [f"femgrid-mpm: error: {path}: time.dt: dt = 'auto' has nothing to limit the step "
+                                "(an infinite critical step: every node fixed, or a stiffness that vanishes in "
+                                "floating point, e.g. a spacing or a body size far from metres); give dt in seconds"]
+    import tomllib
+
+    changes = {key: tomllib.loads(f"v = {text}")["v"] for key, _, text in (s.partition("=") for s in settings)}
+    with pytest.raises(ValueError, match=r"^time\.dt: dt = 'auto' has nothing to limit the step"):
+        Simulation(bundled_scene("vibrating_bar").with_overrides(**changes))
+
+
 def bundled_scene_text(name: str) -> str:
     from importlib.resources import files
 
@@ -235,3 +259,46 @@ def test_shared_contact_keeps_its_balance_without_a_warning():
 
 def test_energy_drift_is_none_without_energy_records(block_scene):
     assert Simulation(block_scene(end=0.05, every=None)).run().summary["energy_drift"] is None
+
+
+# -- body forces without a value ----------------------------------------------------------------------
+
+def body_force_scene(block_scene, acceleration, constants=None):
+    """The block (at rest) with one gravity load first, so that the body force is ``loads[1]``."""
+    force = {"kind": "body_force", "acceleration": acceleration, "constants": constants or {}}
+    return block_scene(velocity=(0.0, 0.0), end=0.05, loads=[{"kind": "gravity", "acceleration": [0.0, -1.0]}, force])
+
+
+@pytest.mark.parametrize("acceleration, constants, step, points", [
+    (["sqrt(-x)", "0"], None, 0, lambda x0: x0[:, 0] > 0),  # NaN wherever x > 0 from the first step
+    (["B*(1 + t)", "0"], {"B": 1e308}, 0, lambda x0: x0[:, 0] == x0[:, 0]),  # m B (1 + t) > 1e308 N: inf
+    (["1/(t - 0.03)", "0"], None, 2, lambda x0: x0[:, 0] == x0[:, 0]),  # 1/0 at t + dt = 0.03
+])
+def test_a_body_force_without_a_value_stops_naming_its_key(block_scene, acceleration, constants, step, points):
+    """A stop (not_finite) naming loads[1].acceleration, the count, the time the force is taken
+    at (t + dt) and the first point, without numpy's warnings; not "the state is no longer finite"."""
+    scene = body_force_scene(block_scene, acceleration, constants)
+    simulation = Simulation(scene)
+    x0 = simulation.particles.x0
+    first = int(np.argmax(points(x0)))
+    with warnings.catch_warnings(), pytest.raises(SimulationStopped) as stop:
+        warnings.simplefilter("error")
+        simulation.run()
+    assert stop.value.reason == "not_finite" and stop.value.step == step
+    x = simulation.particles.x[first]  # where it is at the stop
+    assert str(stop.value) == (
+        f"step {step} (t = {step * 0.01:.6g} s): loads[1].acceleration: gives NaN or infinity (or a force beyond 1e308 N) "
+        f"at {int(points(x0).sum())} point(s) at t = {(step + 1) * 0.01:.6g} s; first at point {first} of body "
+        f"'block' at ({x[0]:.6g}, {x[1]:.6g}), seeded at ({x0[first, 0]:.6g}, {x0[first, 1]:.6g})")
+
+
+def test_a_runaway_body_force_stops_without_numpys_warnings(block_scene):
+    """Forces finite but huge (1e200 exp(100 t) m/s^2): the run stops (the points leave the grid
+    or the state overflows) with no overflow warning from the energy record or the work."""
+    simulation = Simulation(body_force_scene(block_scene, ["1e200*exp(100*t)", "0"]))
+    with warnings.catch_warnings(), pytest.raises(SimulationStopped):
+        warnings.simplefilter("error")
+        simulation.run()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.isfinite(simulation.particles.mass).all() and simulation.particles.volume.shape == (simulation.particles.n,)

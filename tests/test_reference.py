@@ -3,6 +3,7 @@ the bundled scenes that carry one: each reference checked against an independent
 
 import csv
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -177,3 +178,68 @@ def test_lumped_q1_converges_at_second_order_on_the_manufactured_solution():
         errors.append(Simulation(scene).run().summary["reference"]["error_max"])
     order = np.log2(errors[0] / errors[1])
     assert abs(order - 2.0) < 0.25, errors
+
+
+# -- a reference that has no value, overflows or is 0 ------------------------------------------------
+
+
+@pytest.mark.parametrize("displacement, where", [
+    (["sqrt(x - 1)", "0"], lambda x0: x0[:, 0] < 1.0),  # NaN left of x = 1
+    (["exp(1000*x)", "0"], lambda x0: np.ones(len(x0), bool)),  # exp(750) and more: inf
+    (["10**400", "0"], lambda x0: np.ones(len(x0), bool)),
+])
+def test_a_reference_without_a_value_at_t0_is_refused_as_a_velocity_is(block_scene, run_cli, tmp_path,
+                                                                       displacement, where):
+    """Refused when the run is built, naming reference.displacement, the count (counted here
+    from the seeded points) and the first point; the command line: exit 2, one line."""
+    x0 = Simulation(block_scene()).particles.x0
+    bad = where(x0)
+    first = x0[np.argmax(bad)]
+    with pytest.raises(ValueError) as error:
+        Simulation(block_scene(reference={"displacement": displacement}))
+    assert str(error.value) == (f"reference.displacement: gives NaN or infinity at {int(bad.sum())} point(s) at "
+                                f"t = 0 s, the first at ({first[0]:g}, {first[1]:g})")
+    scene = tmp_path / "bar.toml"
+    scene.write_text(bundled_scene_text("vibrating_bar_exact"))
+    code, out, err = run_cli(["info", scene, "--set", f"reference.displacement={json.dumps(displacement)}"])
+    assert code == 2 and out == ""
+    assert len(err.splitlines()) == 1 and "reference.displacement: gives NaN or infinity at " in err
+
+
+def bundled_scene_text(name: str) -> str:
+    from importlib.resources import files
+
+    return (files("femgrid_mpm") / "scenes" / f"{name}.toml").read_text()
+
+
+def test_a_reference_of_1e300_m_gives_its_error_without_overflow(block_scene):
+    """``u = A t`` with A = 1e300 m/s against a block moving at (1, 0.25) m/s: the error is
+    |A - 1| t (to 1e-300) over the scale A t, i.e. 1 at the end; their squares would overflow."""
+    scene = block_scene(reference={"displacement": ["A*t", "0"], "constants": {"A": 1e300}})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        reference = Simulation(scene).run().summary["reference"]
+    assert reference["scale"] == pytest.approx(1e300, rel=1e-12)
+    assert reference["error_end"] == pytest.approx(1.0, rel=1e-12)
+    assert reference["rms_end"] == pytest.approx(1e300, rel=1e-12)
+
+
+def test_a_reference_that_is_0_reports_absolute_errors_and_says_so(block_scene):
+    """Against u = 0 no relative error exists: the summary says so and gives the RMS error in
+    metres, the block's rigid displacement |v| t_end (it moves exactly: round-off)."""
+    reference = Simulation(block_scene(reference={"displacement": [0.0, "0"]})).run().summary["reference"]
+    assert reference["error_end"] is None and reference["error_max"] is None and reference["scale"] == 0.0
+    assert reference["rms_end"] == pytest.approx(np.hypot(1.0, 0.25) * 1.0, rel=1e-9)
+    assert reference["rms_max"] == reference["rms_end"]
+    assert reference["note"].startswith("the exact displacement is 0 at every record counted")
+
+
+def test_a_reference_without_a_value_at_a_later_record_leaves_the_errors_undefined(block_scene):
+    """``1 / (|t - 0.3| > 0.001)`` is 1 except within 1 ms of t = 0.3 s (a record; no time
+    checked at set-up is that close): one warning, and errors None with a note, never inf."""
+    scene = block_scene(reference={"displacement": ["1/(abs(t - 0.3) > 0.001)", "0"]})
+    with pytest.warns(RuntimeWarning, match=r"^reference.displacement: gives NaN or infinity at t = 0.3 s") as caught:
+        reference = Simulation(scene).run().summary["reference"]
+    assert sum("reference.displacement" in str(w.message) for w in caught) == 1
+    assert reference["error_end"] is None and reference["error_max"] is None and reference["period"] is None
+    assert reference["note"] == "reference.displacement gives NaN or infinity at t = 0.3 s: the errors are undefined"

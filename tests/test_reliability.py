@@ -514,3 +514,100 @@ def test_a_resume_whose_particles_is_a_file_is_refused_before_writing(tmp_path, 
     assert code == cli.EXIT_BAD_INPUT
     one_line_error(err, "particles: is not a directory")
     assert snapshot(out) == before
+
+
+def wait_for(path: Path, process, timeout=120.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not path.exists():
+        assert process.poll() is None and time.monotonic() < deadline, process.stderr.read().decode()
+        time.sleep(0.05)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_sigterm_and_sighup_end_a_reproduction_as_sigint_does(tmp_path, signum):
+    """The cantilever's case runs for minutes: the signal falls inside it."""
+    out = tmp_path / "paper"
+    process = cli_process("reproduce", "--case", "cantilever", "--out", out)
+    try:
+        wait_for(out / "cantilever", process)
+        time.sleep(1.0)
+        process.send_signal(signum)
+        code = process.wait(timeout=120)
+    finally:
+        process.kill()
+    err = process.stderr.read().decode()
+    assert code == 128 + signum, err
+    assert "Traceback" not in err and "leaked" not in err
+    name = signal.Signals(signum).name
+    assert err.splitlines()[-1] == f"femgrid-mpm: interrupted: in case cantilever by {name}; no case finished"
+
+
+def test_sigterm_ends_a_sweep_as_sigint_does(tmp_path):
+    """Three runs of 1e6 steps of a block at rest (tens of seconds each), one worker: the
+    signal comes while the first runs; exit 143, its line, nothing computed in runs.csv."""
+    (tmp_path / "bar.toml").write_text(BLOCK.replace("end = 0.2", "end = 10000.0").replace("every = 5", "every = 100000")
+                                       .replace("velocity = [1.0, 0.25]", "velocity = [0.0, 0.0]"))  # at rest
+    sweep_file = tmp_path / "sweep.toml"
+    sweep_file.write_text('scene = "bar.toml"\n[vary]\n"time.end" = [10000.0, 10001.0, 10002.0]\n')
+    out = tmp_path / "out"
+    process = cli_process("sweep", sweep_file, "--out", out, "--workers", "1", "--no-progress")
+    try:
+        wait_for(out / "sweep.toml", process)
+        time.sleep(2.0)
+        process.send_signal(signal.SIGTERM)
+        code = process.wait(timeout=120)
+    finally:
+        process.kill()
+    err = process.stderr.read().decode()
+    assert code == cli.EXIT_TERMINATED == 143, err
+    assert "Traceback" not in err and "leaked" not in err
+    assert err.splitlines()[-1].startswith("femgrid-mpm: interrupted: the finished runs are kept in ")
+    runs = out / "runs.csv"
+    assert not runs.exists() or "completed" not in runs.read_text()
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["sweep", "--help"], ["--version"]])
+def test_help_on_a_full_device_is_exit_1_in_one_line(argv):
+    with open("/dev/full", "w") as full:
+        process = cli_process(*argv, stdout=full)
+        err = process.communicate(timeout=120)[1].decode()
+    assert process.returncode == cli.EXIT_WRITE_FAILED
+    assert err.splitlines() == ["femgrid-mpm: error: cannot write to standard output: No space left on device"]
+
+
+@pytest.mark.parametrize("value, name", [(3, "int"), (None, "NoneType"), (b"scene.toml", "bytes"),
+                                         (bundled_scene("vibrating_bar"), "Scene")])
+def test_load_scene_of_no_path_is_one_scene_error_line(value, name):
+    from femgrid_mpm.scene import load_scene
+
+    with pytest.raises(SceneError) as error:
+        load_scene(value)
+    assert str(error.value).startswith(f"load_scene: expected the path of a scene file (str or Path), got {name}")
+    assert "\n" not in str(error.value)
+
+
+def test_resume_of_a_file_says_it_is_a_file(capsys, block_file):
+    code, _, err = run_cli(["resume", block_file], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    one_line_error(err, f"{block_file}: is a file, not a run's directory")
+
+
+@pytest.mark.parametrize("setting, key", [("bodies.0.points_per_cell=1e300", "bodies[0].points_per_cell"),
+                                          ("time.max_steps=1e30", "time.max_steps")])
+def test_whole_numbers_beyond_64_bits_name_the_key_and_the_range(capsys, block_file, setting, key):
+    code, _, err = run_cli(["info", block_file, "--set", setting], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    line = one_line_error(err, f"{key}: must be a whole number of at most 9.22e+18 (got ")
+    assert "Unable to parse" not in line
+
+
+def test_a_long_set_value_is_echoed_cut_short(capsys, block_file):
+    """A 40,001-character expression and a 1000-item array: the line shows 80 characters
+    and 16 items and says how long they were, not 40 kB."""
+    expression = "x+" * 20000 + "1"
+    code, _, err = run_cli(["info", block_file, "--set", f'bodies.0.velocity=["{expression}", "0"]',
+                            "--set", f"grid.lower=[{', '.join(['1'] * 1000)}]"], capsys)
+    assert code == cli.EXIT_BAD_INPUT
+    line = one_line_error(err, f'bodies.0.velocity = ["{expression[:80]}..." (40001 characters), "0"]',
+                          "grid.lower = [" + "1, " * 16 + "... (1000 items)]")
+    assert len(line) < 600

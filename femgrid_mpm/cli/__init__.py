@@ -22,6 +22,7 @@ notes, one line each).  None of them loads numpy at import: the libraries load i
 
 from __future__ import annotations
 
+import signal
 import sys
 import warnings
 
@@ -29,6 +30,7 @@ from . import info, parser, plot, reproduce, run, sweep
 from .notes import shown_notes
 from .parser import (EXIT_BAD_INPUT, EXIT_CODES, EXIT_DONE, EXIT_HANGUP, EXIT_INTERRUPTED, EXIT_STOPPED,
                      EXIT_TERMINATED, EXIT_WRITE_FAILED, PROG, BadInput, StdoutFailed, discard, say, show_warning)
+from .signals import HANDLED, Interrupted, RunSignals
 
 __all__ = ["main", "BadInput", "PROG", "EXIT_CODES", "EXIT_DONE", "EXIT_WRITE_FAILED", "EXIT_BAD_INPUT",
            "EXIT_STOPPED", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "EXIT_HANGUP"]
@@ -39,15 +41,38 @@ COMMANDS = {"run": run.run, "resume": run.resume, "info": info.info, "plot": plo
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line; returns the exit code (see :data:`EXIT_CODES`)."""
+    """Run the command line; returns the exit code (see :data:`EXIT_CODES`).
+
+    SIGINT, SIGTERM and SIGHUP end every command as an interrupt (130, 143, 129 and one
+    ``interrupted:`` line; :class:`~femgrid_mpm.cli.signals.RunSignals`), not only a run:
+    ``kill`` of a ``reproduce`` or a ``sweep`` unwinds like a Ctrl-C, closing what it started."""
+    with RunSignals() as signals:
+        signals.arm()
+        try:
+            code = dispatch(argv)
+        except Interrupted as interrupt:  # outside a command's own handling (a run's, a sweep's)
+            code = interrupted(interrupt.signum)
+        except KeyboardInterrupt:  # Python's own, where a signal is not ours to handle
+            code = interrupted(signal.SIGINT)
+        if code == EXIT_INTERRUPTED and signals.received is not None:
+            # a command that ends a Ctrl-C its own way (sweep) returns 130 whatever the signal
+            code = HANDLED[signals.received]
+        return code
+
+
+def interrupted(signum: int) -> int:
+    """The line of an interrupt outside a run, and its exit code."""
+    say("interrupted", "stopped by the user" if signum == signal.SIGINT else f"by {signal.Signals(signum).name}")
+    return HANDLED[signum]
+
+
+def dispatch(argv: list[str] | None) -> int:
+    """Parse ``argv`` and run its command; its exit code."""
     try:
         try:
             args = parser.build_parser().parse_args(argv)
         except SystemExit as exit_:  # --help (0) or a usage error (2, printed as one line)
             return exit_.code if isinstance(exit_.code, int) else EXIT_BAD_INPUT
-    except KeyboardInterrupt:  # while the libraries load (about a second)
-        say("interrupted", "stopped by the user")
-        return EXIT_INTERRUPTED
     except BrokenPipeError:  # --help into a closed pipe
         discard(sys.stdout)
         return EXIT_DONE
@@ -65,6 +90,3 @@ def main(argv: list[str] | None = None) -> int:
         except StdoutFailed as error:
             say("error", f"cannot write to standard output: {error}")
             return EXIT_WRITE_FAILED
-        except KeyboardInterrupt:  # outside a run (a run writes its outputs first)
-            say("interrupted", "stopped by the user")
-            return EXIT_INTERRUPTED

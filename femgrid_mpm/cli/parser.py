@@ -36,13 +36,16 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"{PROG}: error: {message} (see {self.prog} --help)\n")
 
     def _print_message(self, message, file=None):
-        # argparse ignores a failed write; the help or version on a full stdout is exit 1
-        # (main catches the OSError; a closed pipe ends quietly)
-        if message and file is sys.stdout:
-            file.write(message)
-            file.flush()
-        else:
-            super()._print_message(message, file)
+        # argparse drops a failed write: --help or --version into a full disk would exit 0
+        # with nothing written; on stdout it raises (exit 1, or a closed pipe's quiet 0)
+        if message:
+            file = file or sys.stderr
+            try:
+                file.write(message)
+                file.flush()
+            except OSError:
+                if file is sys.stdout:
+                    raise
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -6,8 +6,9 @@ import contextlib
 import sys
 import warnings
 
-from .parser import EXIT_DONE, EXIT_WRITE_FAILED, BadInput, emit, output_directory, say
+from .parser import EXIT_DONE, EXIT_INTERRUPTED, EXIT_WRITE_FAILED, BadInput, emit, output_directory, say
 from .progress import runs_bar
+from .signals import HANDLED, Interrupted
 
 
 def reproduce(args) -> int:
@@ -39,15 +40,21 @@ def reproduce(args) -> int:
     warnings.simplefilter("ignore")  # expected events (negative masses under "warn") are in the tables
     chosen = [name for name in CASES if not args.case or name in args.case]
     bar, follow = runs_bar(sum(PLANNED_RUNS[name]() for name in chosen), sys.stderr.isatty())
+    finished: list[str] = []
     try:
         with following(follow) if follow else contextlib.nullcontext():
             for name in chosen:
                 if bar is None:
                     print(f"{name} ...", file=sys.stderr, flush=True)
                 CASES[name](out / name)
+                finished.append(name)
                 table = out / name / "table.md"
                 if table.exists():
                     (bar.write if bar is not None else emit)(table.read_text())
+    except KeyboardInterrupt as interrupt:  # Ctrl-C, kill, a closed terminal (cli.signals)
+        if bar is not None:
+            bar.close()
+        return interrupted(interrupt, out, chosen[len(finished)], finished)
     finally:
         if bar is not None:
             bar.close()
@@ -60,3 +67,12 @@ def reproduce(args) -> int:
             say("error", f"--gallery {gallery}: cannot write there: {error.strerror or error}")
             return EXIT_WRITE_FAILED
     return EXIT_DONE
+
+
+def interrupted(interrupt: KeyboardInterrupt, out, case: str, finished: list[str]) -> int:
+    """The line of a reproduction interrupted in ``case``, and its exit code (128 + the signal)."""
+    signum = interrupt.signum if isinstance(interrupt, Interrupted) else None
+    by = f" by {interrupt.name}" if signum is not None and HANDLED[signum] != EXIT_INTERRUPTED else ""
+    kept = f"the finished cases ({', '.join(finished)}) are in {out}" if finished else "no case finished"
+    say("interrupted", f"in case {case}{by}; {kept}")
+    return HANDLED[signum] if signum is not None else EXIT_INTERRUPTED

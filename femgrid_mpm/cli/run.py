@@ -48,7 +48,9 @@ def resume(args) -> int:
     directory = Path(args.directory)
     try:
         if not directory.is_dir():
-            raise BadInput(f"{directory}: no such directory")
+            what = "no such directory" if not directory.exists() else (
+                "is a file, not a run's directory" if directory.is_file() else "is not a directory")
+            raise BadInput(f"{directory}: {what} (resume takes the --out directory of a run)")
     except OSError as error:  # e.g. a name longer than the file system allows
         raise BadInput(f"{directory}: cannot be used: {error.strerror or error}") from None
     try:

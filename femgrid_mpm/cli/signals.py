@@ -54,9 +54,10 @@ class RunSignals:
     def __exit__(self, *exc) -> None:
         # after a signal the process is ending as interrupted: more of them (a burst of
         # Ctrl-C) are ignored to its exit, where Python's handler would raise in the middle
-        # of the last line, or kill the process by the signal
+        # of the last line, or kill the process by the signal; so after one that a context
+        # inside this one received (it left them ignored: a run inside a command)
         for signum, previous in self._previous.items():
-            if self.received is not None:
+            if self.received is not None or signal.getsignal(signum) == signal.SIG_IGN:
                 signal.signal(signum, signal.SIG_IGN)
             else:
                 signal.signal(signum, previous if previous is not None else signal.SIG_DFL)

@@ -24,7 +24,7 @@ from typing import Annotated, Callable, Union
 
 from pydantic import Field
 
-from .base import Stage, StepContext
+from .base import ForceNotFinite, Stage, StepContext
 from .body_force import BodyForce
 from .contact import Contact
 from .damping import MassDamping
@@ -83,6 +83,17 @@ def kinds(table: str) -> tuple[str, ...]:
     return tuple(entry.kind for entry in entries(table) if entry.kind is not None)
 
 
+def scene_key(scene, effect) -> str:
+    """The key that declares ``effect`` (the very object) in ``scene``: ``loads[1]``, ``damping``;
+    its name if the scene does not declare it."""
+    for table in tables():
+        value = getattr(scene, table)
+        for index, item in enumerate(value if isinstance(value, tuple) else (value,)):
+            if item is effect:
+                return f"{table}[{index}]" if isinstance(value, tuple) else table
+    return effect.name
+
+
 def table_type(table: str):
     """The type of one item of a scene table: its effect's class, or, for several,
     their union discriminated on ``kind`` (members in registry order)."""
@@ -104,6 +115,7 @@ __all__ = [
     "Contact",
     "Entry",
     "ExactReference",
+    "ForceNotFinite",
     "Gravity",
     "MassDamping",
     "PointLoad",
@@ -113,6 +125,7 @@ __all__ = [
     "acts",
     "entries",
     "kinds",
+    "scene_key",
     "table_type",
     "tables",
 ]

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..step import Action, Stage, StepContext
 
-__all__ = ["Action", "Effect", "Recorder", "Stage", "StepContext"]
+__all__ = ["Action", "Effect", "ForceNotFinite", "Recorder", "Stage", "StepContext"]
 
 
 class Effect(abc.ABC):
@@ -78,3 +78,22 @@ class Recorder(abc.ABC):
     @abc.abstractmethod
     def restore(self, rows: np.ndarray) -> None:
         """Take back :meth:`state`; ValueError if it does not fit."""
+
+
+class ForceNotFinite(ArithmeticError):
+    """Raised by an effect's action whose forces are NaN or infinite at some points (an
+    expression that overflows or has no value there); the simulation stops on it, naming
+    the effect's key in the scene (:meth:`message`)."""
+
+    def __init__(self, effect: Effect, key: str, points: np.ndarray, time: float):
+        super().__init__(f"{effect.name}.{key}: NaN or infinity at {len(points)} point(s) at t = {time:g} s")
+        self.effect, self.key, self.points, self.time = effect, key, points, time
+
+    def message(self, scene, particles) -> str:
+        """``loads[N].KEY: gives NaN or infinity ...``, the first point described."""
+        from ..diagnostics import describe_point
+        from . import scene_key
+
+        return (f"{scene_key(scene, self.effect)}.{self.key}: gives NaN or infinity (or a force beyond 1e308 N) at "
+                f"{len(self.points)} point(s) at t = {self.time:.6g} s; first at "
+                f"{describe_point(particles, scene.bodies, int(self.points[0]))}")

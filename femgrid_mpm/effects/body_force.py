@@ -11,7 +11,7 @@ from pydantic.dataclasses import dataclass
 
 from ..expressions import compile_vector, evaluate_vector
 from ..step import Stage, StepContext
-from .base import Effect
+from .base import Effect, ForceNotFinite
 from .config import EFFECT_CONFIG
 
 #: the variables of the acceleration's expressions: the point's initial position and the time
@@ -60,6 +60,11 @@ class BodyForce(Effect):
 
         def add_body_force(ctx: StepContext) -> None:
             t = np.float64(ctx.force_time)  # t + dt in the step, t at the centred scheme's start
-            ctx.add_point_forces(self.name, mass[:, None] * evaluate_vector(components, len(mass), x=x, y=y, t=t))
+            with np.errstate(over="ignore", invalid="ignore"):  # checked below: a stop naming the key
+                forces = mass[:, None] * evaluate_vector(components, len(mass), x=x, y=y, t=t)
+            bad = ~np.isfinite(forces).all(axis=1)
+            if bad.any():
+                raise ForceNotFinite(self, "acceleration", np.flatnonzero(bad), float(t))
+            ctx.add_point_forces(self.name, forces)
 
         return add_body_force

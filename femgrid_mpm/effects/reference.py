@@ -24,6 +24,7 @@ Examples
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import field
 from typing import Literal, Union
 
@@ -75,7 +76,14 @@ class ExactReference(Effect):
 
 class ReferenceError(Recorder):
     """The record of :class:`ExactReference`: per record the time, the RMS error (m),
-    the largest exact displacement (m) and the projection the period is measured on."""
+    the largest exact displacement (m) and the projection the period is measured on.
+
+    An exact field that is NaN or infinite at a point is refused when the run is built
+    (ValueError naming ``reference.displacement``, the time and the point), checked at
+    t = 0, at the times sampled for the period's shape and at ``time.end``; one found
+    later, between those, makes the errors from that record on undefined (None in the
+    summary, with a ``note`` and one warning), never a silent inf or NaN.
+    """
 
     FIELDS = ("time", "rms", "peak", "projection")
 
@@ -87,19 +95,46 @@ class ReferenceError(Recorder):
         self.exact = spec.exact()
         self.rows: list[tuple[float, float, float, float]] = []
         # the shape of the period's projection: the exact field where it is largest (mass-weighted)
-        horizon = spec.period if spec.period is not None else simulation.scene.time.end
-        samples = [self.exact(self.x, self.y, t) for t in np.linspace(0.0, horizon, SHAPE_SAMPLES + 1)[1:]]
-        norms = [float(np.sum(particles.mass[:, None] * u**2)) for u in samples]
-        self.shape = samples[int(np.argmax(norms))]
+        end = simulation.scene.time.end
+        horizon = spec.period if spec.period is not None else end
+        times = np.linspace(0.0, horizon, SHAPE_SAMPLES + 1)[1:]
+        for t in (0.0, end):
+            self.finite(self.exact(self.x, self.y, t), t)
+        samples = [self.finite(self.exact(self.x, self.y, t), t) for t in times]
+        norms = [rms_norm(np.sqrt(particles.mass)[:, None] * u) for u in samples]
+        shape = samples[int(np.argmax(norms))]
+        # scaled to a largest component of 1: the zero crossings are the same, and no product overflows
+        largest = float(np.max(np.abs(shape))) if shape.size else 0.0
+        self.shape = shape / largest if largest > 0 else shape
+
+    def finite(self, exact: np.ndarray, t: float) -> np.ndarray:
+        """``exact`` (the field at time ``t``) if finite everywhere; else ValueError naming the key."""
+        bad = ~np.isfinite(exact).all(axis=1)
+        if bad.any():
+            first = int(np.argmax(bad))
+            raise ValueError(f"reference.displacement: gives NaN or infinity at {int(bad.sum())} point(s) at "
+                             f"t = {t:g} s, the first at ({self.x[first]:g}, {self.y[first]:g})")
+        return exact
 
     def __call__(self, ctx: StepContext) -> None:
         p = self.particles
         displacement = p.x - p.x0
         exact = self.exact(self.x, self.y, ctx.time)
-        rms = float(np.sqrt(np.mean(np.sum((displacement - exact) ** 2, axis=1)))) if p.n else 0.0
-        peak = float(np.sqrt(np.max(np.sum(exact**2, axis=1)))) if p.n else 0.0
-        projection = float(np.sum(p.mass * np.sum(displacement * self.shape, axis=1)))
+        if not np.isfinite(exact).all():
+            if self.undefined_from() is None:
+                warnings.warn(f"reference.displacement: gives NaN or infinity at t = {ctx.time:.6g} s: the "
+                              "reference errors from then on are undefined", RuntimeWarning)
+            self.rows.append((float(ctx.time), np.nan, np.nan, np.nan))
+            return
+        with np.errstate(over="ignore", invalid="ignore"):  # a displacement beyond 1e308: inf, no warning
+            rms = rms_norm(displacement - exact)
+            projection = float(np.sum(p.mass * np.sum(displacement * self.shape, axis=1)))
+        peak = float(np.max(np.hypot(exact[:, 0], exact[:, 1]))) if p.n else 0.0
         self.rows.append((float(ctx.time), rms, peak, projection))
+
+    def undefined_from(self) -> float | None:
+        """The time of the first record where the exact field was not finite, or None."""
+        return next((row[0] for row in self.rows if np.isnan(row[2])), None)
 
     def _scale(self, upto: int) -> float:
         """The largest exact displacement of the records up to ``upto`` (of that record alone
@@ -109,30 +144,46 @@ class ReferenceError(Recorder):
         return max(row[2] for row in self.rows[: upto + 1])
 
     def relative(self, index: int) -> float:
-        """Record ``index``'s RMS error over the scale so far (the last record's is ``error_end``)."""
+        """Record ``index``'s RMS error over the scale so far (the last record's is ``error_end``);
+        0 where both are 0; NaN where it is undefined: an error against an exact field that is
+        0 (scale 0), or one that is not finite."""
         rms, scale = self.rows[index][1], self._scale(index)
-        return rms / scale if scale > 0 else (0.0 if rms == 0 else float("inf"))
+        if scale > 0:
+            return rms / scale
+        return 0.0 if rms == 0 else float("nan")
 
     def columns(self) -> dict:
         return {"reference_error": lambda: self.relative(len(self.rows) - 1)}
 
     def summary(self) -> dict:
-        """``{"reference": {...}}``: ``error_end``, ``error_max``, the measured ``period``,
-        ``period_exact`` and ``period_error`` (relative), ``when``; errors None before a record."""
+        """``{"reference": {...}}``: ``error_end``, ``error_max`` (relative to ``scale``),
+        ``rms_end``, ``rms_max`` (m), the measured ``period``, ``period_exact`` and
+        ``period_error`` (relative), ``when``; errors None before a record.  An exact field
+        that is 0 over the records (scale 0) or not finite leaves the relative errors None
+        and says why in ``note``."""
         spec, rows = self.spec, self.rows
-        entry = {"when": spec.when, "error_end": None, "error_max": None, "scale": None,
-                 "period": None, "period_exact": spec.period, "period_error": None}
-        if rows:
+        entry = {"when": spec.when, "error_end": None, "error_max": None, "scale": None, "rms_end": None,
+                 "rms_max": None, "period": None, "period_exact": spec.period, "period_error": None}
+        undefined = self.undefined_from()
+        if undefined is not None:
+            entry["note"] = (f"reference.displacement gives NaN or infinity at t = {undefined:.6g} s: "
+                             "the errors are undefined")
+        elif rows:
             last = len(rows) - 1
             scale = self._scale(last)
+            counted = rows[last:] if spec.when == "end" else rows
             entry["scale"] = scale
-            entry["error_end"] = self.relative(last)
-            if spec.when == "end":
-                entry["error_max"] = entry["error_end"]
+            entry["rms_end"] = rows[last][1]
+            entry["rms_max"] = max(row[1] for row in counted)
+            if scale > 0:
+                entry["error_end"] = rows[last][1] / scale
+                entry["error_max"] = entry["rms_max"] / scale
+            elif entry["rms_max"] == 0:  # the run is at rest as its reference is
+                entry["error_end"] = entry["error_max"] = 0.0
             else:
-                largest = max(row[1] for row in rows)
-                entry["error_max"] = largest / scale if scale > 0 else (0.0 if largest == 0 else float("inf"))
-        if spec.period is not None and len(rows) > 2:
+                entry["note"] = ("the exact displacement is 0 at every record counted: an error relative to it "
+                                 "is undefined; rms_end and rms_max are the absolute errors (m)")
+        if spec.period is not None and len(rows) > 2 and undefined is None:
             times, projections = np.array([row[0] for row in rows]), np.array([row[3] for row in rows])
             measured = zero_crossing_period(times, projections)
             if np.isfinite(measured):
@@ -148,3 +199,15 @@ class ReferenceError(Recorder):
         if rows.size and (rows.ndim != 2 or rows.shape[1] != len(self.FIELDS)):
             raise ValueError(f"reference.rows: shape {rows.shape}, the reference record has {len(self.FIELDS)} columns")
         self.rows[:] = [tuple(float(v) for v in row) for row in rows]
+
+
+def rms_norm(vectors: np.ndarray) -> float:
+    """``sqrt(mean_p |v_p|^2)`` of (n, 2) vectors, 0 for none; scaled by the largest component
+    first, so that vectors beyond 1e154 do not overflow their squares."""
+    if not len(vectors):
+        return 0.0
+    largest = float(np.max(np.abs(vectors)))
+    if not 0 < largest < np.inf:  # 0, inf or NaN: the norm is that
+        return largest
+    scaled = vectors / largest
+    return largest * float(np.sqrt(np.mean(np.sum(scaled * scaled, axis=1))))

@@ -19,6 +19,7 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
     Parameters
     ----------
     path : str or Path
+        Anything else (a :class:`Scene`, bytes, None) is a :class:`SceneError`.
     overrides : dict, optional
         Dotted keys into the file (list items by index) and their values,
         set in the file's data before it is validated:
@@ -32,8 +33,13 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
         would convert (``spacing = "0.5"``, ``spacing = true``,
         ``particles = 1``) is refused.
     """
+    import os
     import tomllib
 
+    if not isinstance(path, (str, os.PathLike)) or isinstance(os.fspath(path), bytes):
+        advice = " (a Scene is loaded already: use it, or its with_overrides)" if isinstance(path, Scene) else ""
+        raise SceneError(f"load_scene: expected the path of a scene file (str or Path), "
+                         f"got {type(path).__name__}{advice}")
     path = Path(path)
     try:
         data = tomllib.loads(read_regular_file(path).decode())

@@ -106,6 +106,8 @@ def _message(error: dict, model) -> str:
         return "must be a finite number (not NaN or infinity)"
     if kind == "union_tag_invalid":
         return f"unknown kind {_shown(context.get('tag'))} (expected {context.get('expected_tags')})"
+    if kind == "int_parsing_size":  # a number beyond what pydantic takes as a whole number (1e300)
+        return f"must be a whole number of at most {2**63 - 1:.3g}"
     if kind in ("float_parsing", "int_parsing", "float_type", "int_type", "int_from_float"):
         return "must be a whole number" if kind.startswith("int") else "must be a number"
     if kind == "missing" and isinstance(error["loc"][-1], int):
@@ -171,9 +173,14 @@ def _fields(node) -> dict:
     return {name: info.annotation for name, info in fields.items()}
 
 
+#: the characters of a string, and the items of an array, a message shows (then "...")
+SHOWN_CHARACTERS, SHOWN_ITEMS = 80, 16
+
+
 def _shown(value, depth: int = 0) -> str:
     """A value as it would be written in TOML (``true``, ``"q3"``, ``nan``); numpy arrays as
-    arrays, nesting beyond 8 levels as ``...``."""
+    arrays, nesting beyond 8 levels as ``...``; a string beyond :data:`SHOWN_CHARACTERS`
+    and an array beyond :data:`SHOWN_ITEMS` cut short, saying how long they are."""
     if depth > 8:
         return "..."
     if isinstance(value, bool):
@@ -181,13 +188,18 @@ def _shown(value, depth: int = 0) -> str:
     if isinstance(value, str):
         import json
 
+        if len(value) > SHOWN_CHARACTERS:  # a message stays one readable line
+            return json.dumps(value[:SHOWN_CHARACTERS])[:-1] + f'..." ({len(value)} characters)'
         return json.dumps(value)
     if isinstance(value, float) and not math.isfinite(value):
         return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
     if hasattr(value, "tolist") and hasattr(value, "dtype"):  # numpy arrays and scalars as Python values
         return _shown(value.tolist(), depth)
     if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_shown(item, depth + 1) for item in value) + "]"
+        shown = [_shown(item, depth + 1) for item in value[:SHOWN_ITEMS]]
+        if len(value) > SHOWN_ITEMS:
+            shown.append(f"... ({len(value)} items)")
+        return "[" + ", ".join(shown) + "]"
     if isinstance(value, dict):
         return "{" + ", ".join(f"{key} = {_shown(item, depth + 1)}" for key, item in value.items()) + "}"
     return repr(value)
