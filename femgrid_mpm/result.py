@@ -31,3 +31,34 @@ class RunResult:
     energy: dict | None
     particles: Particles
     summary: dict = field(default_factory=dict)
+
+
+def run_result(simulation, status: str, message: str) -> RunResult:
+    """The :class:`RunResult` of ``simulation`` (a :class:`~femgrid_mpm.solver.Simulation`) as it
+    stands: its state, its energy records and the summary that ``summary.json`` holds."""
+    from .observers import energy_drift
+
+    s = simulation
+    scene = s.scene
+    summary = {
+        "title": scene.title,
+        "basis": scene.grid.basis,
+        "mass": scene.solver.mass,
+        "status": status,
+        "reason": message,
+        "steps": s.step_index,
+        "time": s.time,
+        "dt": s.dt,
+        "critical_dt": s.__dict__.get("critical_dt"),  # if it was estimated (CLI runs, dt = "auto")
+        "wall_time": s.wall_time,
+        "points": s.particles.n,
+        "nodes": s.grid.n_nodes,
+        "effects": s.active_effects,
+        "negative_mass": s.negative_mass.summary(),
+        "energy_drift": energy_drift(s.energy.rows) if s.energy else None,
+    }
+    summary.update(s.mass.summary())
+    for recorder in s.recorders:
+        summary.update(recorder.summary())
+    energy = s.energy.table() if s.energy else None
+    return RunResult(status, message, energy, s.particles, summary)

@@ -26,14 +26,14 @@ import numpy as np
 
 from .diagnostics import (EnergyGuard, NegativeMassMonitor, SimulationStopped, fastest_point, first_not_finite,
                           points_kinetic_energy, warn_of_a_long_step, warn_of_energy_drift)
-from .observers import EnergyBookkeeping, energy_drift, kinetic_energy
+from .observers import EnergyBookkeeping, kinetic_energy
 from .effects.base import ForceNotFinite, Recorder
 from .engines import engine_for
 from .grid import Grid
 from .mass import CellMasses, MassModel, SingularMassError, build_mass_model
 from .materials import make_material
 from .particles import seed_bodies, warn_of_overlaps, warn_of_thin_bodies
-from .result import RunResult
+from .result import RunResult, run_result
 from .scene import Scene
 from .scene.limits import run_steps
 from .stability import critical_time_step
@@ -390,26 +390,4 @@ class Simulation:
         restore_state(self, arrays, values)
 
     def result(self, status: str, message: str) -> RunResult:
-        scene = self.scene
-        summary = {
-            "title": scene.title,
-            "basis": scene.grid.basis,
-            "mass": scene.solver.mass,
-            "status": status,
-            "reason": message,
-            "steps": self.step_index,
-            "time": self.time,
-            "dt": self.dt,
-            "critical_dt": self.__dict__.get("critical_dt"),  # if it was estimated (CLI runs, dt = "auto")
-            "wall_time": self.wall_time,
-            "points": self.particles.n,
-            "nodes": self.grid.n_nodes,
-            "effects": self.active_effects,
-            "negative_mass": self.negative_mass.summary(),
-            "energy_drift": energy_drift(self.energy.rows) if self.energy else None,
-        }
-        summary.update(self.mass.summary())
-        for recorder in self.recorders:
-            summary.update(recorder.summary())
-        energy = self.energy.table() if self.energy else None
-        return RunResult(status, message, energy, self.particles, summary)
+        return run_result(self, status, message)
