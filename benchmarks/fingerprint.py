@@ -31,7 +31,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-BASES = ("q1", "q2", "serendipity", "bspline3", "bspline3_open", "gimp", "bspline2")
+BASES = ("q1", "q2", "serendipity", "bspline3", "bspline3_open", "gimp", "bspline2", "bspline2_open")
 PAPER_BASES = ("q1", "q2", "serendipity", "bspline3")
 MASSES = ("lumped", "hrz", "consistent")
 PAPER_CASES = ("vibrating_bar", "cantilever", "box_impact")

@@ -111,6 +111,19 @@ def test_bspline2_matches_the_quadratic_spline():
     np.testing.assert_allclose(N.toarray(), expected, rtol=0, atol=1e-14)
 
 
+def test_open_knot_quadratic_splines_interpolate_at_the_boundary():
+    """On the domain's edge only the edge node's function is non-zero, and it is 1: fixing the
+    nodes on x <= 0 holds the wall exactly; the edge nodes lie on the edge, the next ones half a
+    spacing in (their Greville abscissae)."""
+    grid = Grid("bspline2_open", (0.0, 0.0), (3.0, 2.0), 0.5)
+    rng = np.random.default_rng(7)
+    wall = np.column_stack([np.zeros(20), rng.uniform(0.0, 2.0, 20)])
+    N, _, _ = grid.shape_functions(wall)
+    on_wall = grid.nodes_where("x <= 0")
+    np.testing.assert_array_equal(N[:, on_wall].sum(axis=1), 1.0)
+    assert sorted(set(grid.nodes[:, 0])) == [0.0, 0.25, 0.75, 1.25, 1.75, 2.25, 2.75, 3.0]
+
+
 def test_bspline3_quadratic_offset():
     """Cubic B-splines on nodes reproduce x^2 + h^2/3 (Schoenberg), an exact identity."""
     grid = make_grid("bspline3")

@@ -84,7 +84,7 @@ def test_bodies_of_different_point_sizes_are_refused():
         block((2, 3))
 
 
-@pytest.mark.parametrize("basis", ["gimp", "bspline2"])
+@pytest.mark.parametrize("basis", ["gimp", "bspline2", "bspline2_open"])
 @pytest.mark.parametrize("engine", ["scipy", "numba"])
 @pytest.mark.parametrize("mass", ["lumped", "hrz", "consistent"])
 def test_a_rigid_translation_is_exact(basis, engine, mass):

@@ -10,7 +10,7 @@ from this registry.
 """
 
 from .definition import BasisDefinition
-from .bspline2 import BSPLINE2
+from .bspline2 import BSPLINE2, BSPLINE2_OPEN
 from .bspline3 import BSPLINE3, BSPLINE3_OPEN, ElementBSpline3, cubic_spline
 from .finite_element import Q1, Q2, SERENDIPITY, FiniteElementBasis
 from .gimp import GIMP
@@ -18,12 +18,13 @@ from .lattice import Discretization
 from .pieces import TensorPieces
 from .polynomial import LocalPolynomials
 
-BASES = {builder.name: builder for builder in (Q1, Q2, SERENDIPITY, BSPLINE3, BSPLINE3_OPEN, GIMP, BSPLINE2)}
+BASES = {builder.name: builder for builder in (Q1, Q2, SERENDIPITY, BSPLINE3, BSPLINE3_OPEN, GIMP, BSPLINE2, BSPLINE2_OPEN)}
 
 __all__ = [
     "BASES",
     "BasisDefinition",
     "BSPLINE2",
+    "BSPLINE2_OPEN",
     "BSPLINE3",
     "BSPLINE3_OPEN",
     "Discretization",
