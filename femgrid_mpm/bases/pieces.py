@@ -105,6 +105,11 @@ class TensorPieces:
         return values, derivatives
 
 
+#: node entries of all pieces (nine each) a basis on pieces may lay out: about 45 bytes each at
+#: the peak of the set-up (1.1 GB for 200 x 200 cells of gimp at 4 points per cell, 2.6e6 pieces)
+MAX_PIECE_ENTRIES = 25_000_000
+
+
 def nearest_node_pieces(n_cells: int, per_spacing: int, weight) -> tuple[np.ndarray, np.ndarray]:
     """Pieces ``1 / per_spacing`` of a spacing wide along one direction of ``n_cells`` lattice
     cells, for a basis whose 1D function ``weight(r)`` (``r`` in spacings from its node) is one
@@ -133,6 +138,13 @@ def nearest_node_discretization(name: str, lower: np.ndarray, n_elements: tuple[
 
     from .lattice import Discretization
 
+    pieces = n_elements[0] * n_elements[1] * per_spacing**2
+    if pieces * 9 > MAX_PIECE_ENTRIES:  # each piece stores its nine nodes (the flat kernels read them)
+        raise ValueError(
+            f"{name}: {n_elements[0]} x {n_elements[1]} cells cut into {per_spacing} x {per_spacing} pieces each "
+            f"({pieces:.3g} pieces) need about {pieces * 9 * 45 / 1e9:.2g} GB to lay out, more than the "
+            f"{MAX_PIECE_ENTRIES * 45 / 1e9:.2g} GB allowed: a coarser grid"
+            + (" or fewer points per cell" if per_spacing > 2 else ""))
     (tables_x, nearest_x), (tables_y, nearest_y) = (nearest_node_pieces(n, per_spacing, weight) for n in n_elements)
     nx, ny = n_elements[0] + 3, n_elements[1] + 3  # nodes per direction, with the ghost columns
     ix_nodes, iy_nodes = np.meshgrid(np.arange(nx) - 1, np.arange(ny) - 1, indexing="ij")
