@@ -52,9 +52,14 @@ def test_compiled_shape_functions_match_the_grid(basis):
 
 
 def test_tensor_kernels_cover_the_tensor_bases():
-    """q1, q2 and both cubic splines take the unrolled tensor kernels; serendipity the folded ones."""
+    """q1, q2, both cubic splines and the open-knot quadratic ones take the unrolled tensor kernels;
+    serendipity the folded ones; the bases on pieces finer than the node lattice (gimp, the
+    quadratic splines with the extra column), whose nodes are no affine function of the piece,
+    the flat ones."""
     tables = {name: separated_tables(Grid(name, (0, 0), (2, 2), 0.5)) for name in BASIS_NAMES}
-    assert {name for name, t in tables.items() if t.tensor is not None} == {"q1", "q2", "bspline3", "bspline3_open"}
+    assert {name for name, t in tables.items() if t.tensor is not None} == {"q1", "q2", "bspline3", "bspline3_open",
+                                                                             "bspline2_open"}
+    assert {name for name, t in tables.items() if t.tensor is None and t.folded is None} == {"gimp", "bspline2"}
     assert {name for name, t in tables.items() if t.folded is not None} == {"serendipity"}
     # and q1's factors, exactly (1 - s, s), are computed as such (the values: the tests above)
     assert {name for name, t in tables.items() if t.tensor is not None and t.tensor.marker == LINEAR} == {"q1"}
@@ -340,9 +345,9 @@ def test_assembled_mass_matrix_is_symmetric_and_matches_the_product(basis):
     """The P2G kernels assemble the upper half of ``N.T diag(m) N`` in stencil order and
     copy the rest from the transposes: the matrix is symmetric bit for bit, and agrees
     with scipy's product of the same points' ``N`` to 1e-12 of its largest entry.  The
-    fast path (consecutive slots) serves q1 and the splines; q2 (middle node last in its
-    1D order), serendipity (folded kernels) and the incomplete rows at the grid's edge
-    take the general one."""
+    fast path (consecutive slots) serves q1 and the tensor splines; q2 (middle node last in
+    its 1D order), serendipity (folded kernels), the flat kernels (gimp, bspline2) and the
+    incomplete rows at the grid's edge take the general one."""
     import scipy.sparse as sp
 
     scene = block_scene(basis, "consistent", "numba")
@@ -356,7 +361,7 @@ def test_assembled_mass_matrix_is_symmetric_and_matches_the_product(basis):
     # M itself, rebuilt from the solve's system (made from the pattern's entries in place)
     assert simulation.mass._correction is not None
     assembled = sp.csr_matrix(simulation.mass.matrix)
-    assert engine._ordered == (basis in ("q1", "bspline3", "bspline3_open"))
+    assert engine._ordered == (basis in ("q1", "bspline3", "bspline3_open", "bspline2_open"))
     assert (assembled != assembled.T).nnz == 0
     N = simulation.grid.shape_functions(p.x)[0]
     product = (N.T @ sp.diags(p.mass) @ N).toarray()
