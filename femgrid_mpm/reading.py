@@ -60,3 +60,37 @@ def read_regular_file(path, limit: int = MAX_SCENE_BYTES) -> bytes:
     if len(data) > limit:  # it grew while being read
         raise FileRefused(f"is more than the {limit} bytes read at most")
     return data
+
+
+class InputRefused(ValueError):
+    """An input file that could not be read as TOML; the message is one line naming the file."""
+
+
+def read_toml(path, what: str) -> dict:
+    """The tables of the TOML file ``path`` (a ``what``: "scene file", "sweep file"), read as
+    :func:`read_regular_file` reads.
+
+    Raises
+    ------
+    InputRefused
+        One line naming ``path``: missing, a directory, not a regular file, too large,
+        unreadable, not UTF-8, not valid TOML, or nested too deeply for the TOML reader.
+    """
+    import tomllib
+
+    path = Path(path)
+    try:
+        return tomllib.loads(read_regular_file(path).decode())
+    except FileNotFoundError:
+        problem = f"no such {what}"
+    except IsADirectoryError:
+        problem = f"is a directory, not a {what}"
+    except tomllib.TOMLDecodeError as error:
+        problem = f"not valid TOML: {error}"
+    except RecursionError:
+        problem = f"not valid TOML for a {what}: nested too deeply for the TOML reader"
+    except OSError as error:
+        problem = f"cannot be read: {error.strerror or error}"
+    except UnicodeDecodeError as error:
+        problem = f"cannot be read: {error}"
+    raise InputRefused(" ".join(f"{path}: {problem}".split()))

@@ -32,8 +32,9 @@ SERIES = ((SERIES_FILE, SERIES_DIRECTORY, SERIES_PATTERN), (GRID_FILE, GRID_DIRE
 
 
 @contextlib.contextmanager
-def atomic_path(path: Path) -> Iterator[Path]:
-    """A temporary path next to ``path``, renamed to ``path`` when the block ends.
+def atomic_path(path: Path, keep_suffix: bool = False) -> Iterator[Path]:
+    """A temporary path next to ``path``, renamed to ``path`` when the block ends (ending in
+    ``path``'s suffix with ``keep_suffix``: image writers choose the format by it).
 
     If the block raises (including ``KeyboardInterrupt``), the temporary file
     is removed and ``path`` keeps its previous content.  The temporary name
@@ -41,7 +42,8 @@ def atomic_path(path: Path) -> Iterator[Path]:
     directory listings do not mistake it for an output.
     """
     path = Path(path)
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    temporary = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}" if keep_suffix
+                               else f".{path.name}.{os.getpid()}.tmp")
     try:
         yield temporary
         os.replace(temporary, path)

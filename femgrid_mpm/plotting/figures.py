@@ -4,13 +4,11 @@ colour scale for all the frames of an animation, so that frames and runs compare
 
 from __future__ import annotations
 
-import contextlib
-import os
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
+from ..output.files import atomic_path
 from .run_directory import FIELDS, Frame, RunDirectory
 
 #: figure size (inches) and resolution: 800 x 600 pixels
@@ -22,19 +20,10 @@ ERRORS = ("interpolation_error", "algorithm_error", "total_error", "reference_er
 MAX_LATTICE_LINES = 120
 
 
-@contextlib.contextmanager
-def atomic_file(path: Path) -> Iterator[Path]:
-    """A hidden temporary path next to ``path`` with its suffix (image writers choose the
-    format by it), renamed to ``path`` when the block ends, removed if it raises."""
-    path = Path(path)
-    temporary = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
-    try:
-        yield temporary
-        os.replace(temporary, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            temporary.unlink()
-        raise
+def atomic_file(path: Path):
+    """:func:`~femgrid_mpm.output.files.atomic_path` keeping ``path``'s suffix (the image
+    writers choose the format by it)."""
+    return atomic_path(path, keep_suffix=True)
 
 
 def _figure():

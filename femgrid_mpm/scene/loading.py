@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..reading import read_regular_file
-from .messages import _one_line, _shown
+from ..reading import InputRefused, read_toml
+from .messages import _shown
 from .models import Scene
 from .validation import SceneError, validated
 
@@ -34,7 +34,6 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
         ``particles = 1``) is refused.
     """
     import os
-    import tomllib
 
     if not isinstance(path, (str, os.PathLike)) or isinstance(os.fspath(path), bytes):
         advice = " (a Scene is loaded already: use it, or its with_overrides)" if isinstance(path, Scene) else ""
@@ -42,17 +41,9 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
                          f"got {type(path).__name__}{advice}")
     path = Path(path)
     try:
-        data = tomllib.loads(read_regular_file(path).decode())
-    except FileNotFoundError:
-        raise SceneError(f"{path}: no such scene file") from None
-    except IsADirectoryError:
-        raise SceneError(f"{path}: is a directory, not a scene file") from None
-    except tomllib.TOMLDecodeError as error:
-        raise SceneError(_one_line(f"{path}: not valid TOML: {error}")) from None
-    except RecursionError:
-        raise SceneError(f"{path}: not valid TOML for a scene: nested too deeply for the TOML reader") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise SceneError(_one_line(f"{path}: cannot be read: {error}")) from None
+        data = read_toml(path, "scene file")
+    except InputRefused as error:
+        raise SceneError(str(error)) from None
     source = str(path)
     if overrides:
         if not isinstance(overrides, dict):

@@ -106,25 +106,13 @@ def read_sweep(path) -> SweepSpec:
     two values of a list that are one value (``2`` and ``2.0``) and more runs than
     ``max_runs`` are refused, the last before any combination is formed.
     """
-    import tomllib
-
-    from ..reading import read_regular_file
+    from ..reading import InputRefused, read_toml
 
     path = Path(path)
     try:
-        data = tomllib.loads(read_regular_file(path).decode())
-    except FileNotFoundError:
-        raise SweepError(f"{path}: no such sweep file") from None
-    except IsADirectoryError:
-        raise SweepError(f"{path}: is a directory, not a sweep file") from None
-    except tomllib.TOMLDecodeError as error:
-        raise SweepError(_one_line(f"{path}: not valid TOML: {error}")) from None
-    except RecursionError:
-        raise SweepError(f"{path}: not valid TOML for a sweep file: nested too deeply for the TOML reader") from None
-    except OSError as error:
-        raise SweepError(_one_line(f"{path}: cannot be read: {error.strerror or error}")) from None
-    except UnicodeDecodeError as error:
-        raise SweepError(_one_line(f"{path}: cannot be read: {error}")) from None
+        data = read_toml(path, "sweep file")
+    except InputRefused as error:
+        raise SweepError(str(error)) from None
     try:
         spec = SweepSpec.model_validate(data)
     except ValidationError as error:
@@ -135,8 +123,8 @@ def read_sweep(path) -> SweepSpec:
         raise SweepError(f"{path}: vary: {runs} runs ({sizes}), more than max_runs = {spec.max_runs} "
                          "(raise it in the sweep file: max_runs = N)")
     spelled: dict[str, tuple] = {}
-    for table in ("vary", "set"):
-        for key in getattr(spec, table):
+    for table, keys in (("vary", spec.vary), ("set", spec.set)):
+        for key in keys:
             other = spelled.setdefault(normal_key(key), (table, key))
             if other != (table, key):
                 same = "is also in [vary] (set a key in one of them)" if other[1] == key else \
