@@ -11,6 +11,7 @@ it (``N_ip != 0``), and every body's own where it alone is.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,9 +36,10 @@ class CellMasses:
     def of(cls, densities, spacing: float, body_slices: list) -> "CellMasses":
         return cls(np.array([density * spacing**2 for density in densities], dtype=float), body_slices)
 
-    @property
+    @functools.cached_property
     def uniform(self) -> float | None:
-        """The one scale when every body has the same (then no node needs its own), else None."""
+        """The one scale when every body has the same (then no node needs its own), else None
+        (read twice a step: computed once)."""
         if len(self.per_body) and np.all(self.per_body == self.per_body[0]):
             return float(self.per_body[0])
         return None
