@@ -48,8 +48,10 @@ def _mirror(matrix, mirror_target, mirror_source):
 
 @compiled(inline="always")
 def _no_pattern():
-    """Stand-ins for the mass pattern's arrays when no matrix is assembled (never read)."""
-    return np.zeros(2, np.int32), np.zeros((1, 1), np.int32), np.zeros(1, np.bool_), np.zeros(0, np.int32), np.zeros(1)
+    """Stand-ins for the mass pattern's arrays when no matrix is assembled (never read, so
+    left uninitialized: numba's ``np.zeros`` compiles in twice the time of ``np.empty``,
+    0.8 against 0.4 CPU s of a first run's 6-7, ``benchmarks/compile_time.py --kernels``)."""
+    return np.empty(2, np.int32), np.empty((1, 1), np.int32), np.empty(1, np.bool_), np.empty(0, np.int32), np.empty(1)
 
 
 # -- any basis, function by function: the flat and folded forms (see :mod:`.families`) ---------------------
