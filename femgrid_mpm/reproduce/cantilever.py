@@ -233,7 +233,8 @@ def _figure_stress(runs: dict, path: Path) -> None:
     can be compared colour for colour."""
     low, high = shared_limits(*(run_.particles.stress[:, 0] for run_ in runs.values()))
     bound = max(abs(low), abs(high))
-    figure, axes = plt.subplots(len(runs), 1, figsize=(8, 1.6 * len(runs) + 0.8), sharex=True, layout="constrained")
+    # 1.4 in per panel: eight panels stay under 2000 pixels at 150 dpi
+    figure, axes = plt.subplots(len(runs), 1, figsize=(8, 1.4 * len(runs) + 0.8), sharex=True, layout="constrained")
     for ax, (basis, run_) in zip(axes, runs.items()):
         p = run_.particles
         image = ax.scatter(p.x[:, 0], p.x[:, 1], c=p.stress[:, 0], s=14, cmap="coolwarm", vmin=-bound, vmax=bound)
