@@ -36,6 +36,18 @@ def test_every_bundled_sweep_plans(name):
     """Each sweep of the case reads and every one of its combinations validates (nothing runs)."""
     path = BUNDLED_SWEEPS / f"{name}.toml"
     runs = plan(read_sweep(path), path)
-    # eight bases x three masses x four spacings; the cantilever seven bases (not serendipity) x three spacings
+    # eight bases x three masses x four spacings; the cantilever seven bases (not serendipity) x three
+    # spacings; the two cases of cell crossing five bases, two masses on three spacings and lumped on four
     assert len(runs) == {"bar_convergence": 8 * 3 * 4, "manufactured_convergence": 8 * 3 * 4,
-                         "cantilever_convergence": 7 * 3, "bar_time_steps": 16}[name]
+                         "cantilever_convergence": 7 * 3, "bar_time_steps": 16,
+                         "manufactured_large_convergence": 5 * 2 * 3, "drifting_bar_convergence": 5 * 4}[name]
+
+
+def test_the_vibration_energy_error_is_the_balance_over_the_largest_strain(tmp_path):
+    """A record whose strain energy peaks at 2.0 and whose balance errs by -0.5 at most: 0.25,
+    however large the kinetic energy of the rigid motion it rides on."""
+    from femgrid_mpm.reproduce.cost_accuracy import vibration_energy_error
+
+    path = tmp_path / "energy.csv"
+    path.write_text("time,kinetic,strain,total_error\n0,1000,0.0,0.0\n1,998,2.0,0.1\n2,1000,0.5,-0.5\n")
+    assert vibration_energy_error(path) == pytest.approx(0.25, rel=1e-15)

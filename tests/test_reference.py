@@ -15,7 +15,8 @@ from femgrid_mpm.expressions import compile_expression
 from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
 
-SCENES_WITH_REFERENCE = ("vibrating_bar_exact", "manufactured", "cantilever_quasistatic")
+SCENES_WITH_REFERENCE = ("vibrating_bar_exact", "manufactured", "cantilever_quasistatic", "manufactured_large",
+                         "drifting_bar")
 
 
 def test_a_rigid_motion_has_no_error_and_a_wrong_reference_the_error_it_should(block_scene):
@@ -135,6 +136,49 @@ def test_the_manufactured_body_force_balances_its_displacement_by_finite_differe
     expected = acceleration - np.stack([divergence_x, divergence_y], axis=1) / material.density
     given = np.stack([force[axis](x=x, y=y, t=t) for axis in range(2)], axis=1)
     assert np.abs(given - expected).max() < 1e-6 * np.abs(given).max()
+
+
+def test_the_large_manufactured_body_force_balances_the_neo_hookean_stress_by_finite_differences():
+    """``b = d2u/dt2 - (1/rho_0) div_X P(F)`` with the first Piola-Kirchhoff stress of the
+    library's neo-Hookean law (:class:`~femgrid_mpm.materials.NeoHookean`'s Cauchy stress
+    ``sigma`` turned into ``P = J sigma F^-T``), ``F = I + grad_X u`` and every derivative by
+    central differences of the scene's displacement (steps 1e-4 in X, 1e-5 in t): the scene's
+    body force agrees to 1e-5 of its largest value at 200 random points and times, and the
+    amplitude is large (strains of 0.1 or more at some of them)."""
+    from femgrid_mpm.materials import make_material
+
+    scene = bundled_scene("manufactured_large")
+    body = scene.bodies[0]
+    assert body.material.model == "neo_hookean" and body.material.nu == 0.0
+    law = make_material(body.material)
+    exact = scene.reference.exact()
+    load = scene.loads[0]
+    force = [compile_expression(c, FORCE_VARIABLES, load.constants) for c in load.acceleration]
+    rng = np.random.default_rng(11)
+    x, y, t = rng.uniform(0, 1, 200), rng.uniform(0, 1, 200), rng.uniform(0, scene.time.end, 200)
+    h, k = 1e-4, 1e-5
+
+    def u(X, Y, T):
+        return np.array([exact(X[i:i + 1], Y[i:i + 1], T[i])[0] for i in range(len(X))])
+
+    def piola(X, Y):
+        """P(F(X, Y, t)) per point, shape (n, 2, 2)."""
+        F = np.empty((len(X), 2, 2))
+        F[:, :, 0] = (u(X + h, Y, t) - u(X - h, Y, t)) / (2 * h)
+        F[:, :, 1] = (u(X, Y + h, t) - u(X, Y - h, t)) / (2 * h)
+        F += np.eye(2)
+        sigma = law.cauchy_stress(F)
+        cauchy = np.stack([np.stack([sigma[:, 0], sigma[:, 2]], -1), np.stack([sigma[:, 2], sigma[:, 1]], -1)], 1)
+        J = np.linalg.det(F)
+        return J[:, None, None] * cauchy @ np.linalg.inv(F).transpose(0, 2, 1)
+
+    acceleration = (u(x, y, t + k) - 2 * u(x, y, t) + u(x, y, t - k)) / k**2
+    divergence = ((piola(x + h, y) - piola(x - h, y))[:, :, 0] + (piola(x, y + h) - piola(x, y - h))[:, :, 1]) / (2 * h)
+    expected = acceleration - divergence / body.material.density
+    given = np.stack([force[axis](x=x, y=y, t=t) for axis in range(2)], axis=1)
+    strain = np.abs((u(x + h, y, t) - u(x - h, y, t))[:, 0] / (2 * h))
+    assert strain.max() > 0.1
+    assert np.abs(given - expected).max() < 1e-5 * np.abs(given).max()
 
 
 def test_the_cantilever_reference_is_timoshenko_goodier_with_a_vertical_root_element():

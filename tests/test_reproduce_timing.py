@@ -88,10 +88,12 @@ def test_each_case_run_is_counted_and_warmed_first(tmp_path, monkeypatch):
 def test_the_planned_runs_of_every_case():
     assert set(PLANNED_RUNS) == {"vibrating_bar", "cantilever", "box_impact", "cost_accuracy"}
     assert PLANNED_RUNS["cost_accuracy"]() == 0  # its runs are on the sweep's workers
-    assert PLANNED_RUNS["vibrating_bar"]() == 7
-    bases = len(cantilever.BASES)  # both protocols, the large rotation's three, one resolution per mass
-    assert PLANNED_RUNS["cantilever"]() == 2 * bases + 3 + 2 * bases
-    assert PLANNED_RUNS["cantilever"](resolutions=(0.5, 0.25)) == 2 * bases + 3 + 4 * bases
+    assert PLANNED_RUNS["vibrating_bar"]() == 15
+    # both protocols for every basis, the large rotation's three, one resolution per mass for the
+    # resolution study's bases
+    bases, studied = len(cantilever.BASES), len(cantilever.RESOLUTION_BASES)
+    assert PLANNED_RUNS["cantilever"]() == 2 * bases + 3 + 2 * studied
+    assert PLANNED_RUNS["cantilever"](resolutions=(0.5, 0.25)) == 2 * bases + 3 + 4 * studied
 
 
 def test_the_warm_up_takes_one_tiny_step(monkeypatch):

@@ -1,7 +1,7 @@
 """A box impacting a supported beam, paper section 4.2, Figs. 14-17.
 
-Runs q1, serendipity, q2 and the two cubic-spline bases with the paper's
-shared velocity field, and (where the scene supports it) with frictional
+Runs q1, serendipity, q2, the two cubic-spline bases, the two quadratic-spline
+bases and gimp with the paper's shared velocity field, and (where the scene supports it) with frictional
 multi-field contact, and writes:
 
 * Figs. 14-16: energy measures per basis (shared field, as the paper);
@@ -26,7 +26,7 @@ from ..scene import Scene, bundled_scene
 from .plotting import STOP_MARKER, energy_figure, markdown_table, save, stop_reason, styled, valid_records
 from .timing import timed_run
 
-BASES = ["q1", "serendipity", "q2", "bspline3", "bspline3_open"]
+BASES = ["q1", "serendipity", "q2", "bspline3", "bspline3_open", "bspline2", "bspline2_open", "gimp"]
 PAPER_FIGURE = {"q1": 14, "serendipity": 15, "bspline3": 16}
 NAMES = {
     "q1": "4-node (q1)",
@@ -34,9 +34,13 @@ NAMES = {
     "q2": "9-node (q2)",
     "bspline3": "cubic splines",
     "bspline3_open": "cubic splines, open knots",
+    "bspline2": "quadratic splines",
+    "bspline2_open": "quadratic splines, open knots",
+    "gimp": "GIMP",
 }
 BEAM, BOX = 0, 1
-COLOURS = {"q1": "tab:blue", "serendipity": "tab:orange", "q2": "tab:green", "bspline3": "tab:red", "bspline3_open": "tab:purple"}
+COLOURS = {"q1": "tab:blue", "serendipity": "tab:orange", "q2": "tab:green", "bspline3": "tab:red", "bspline3_open": "tab:purple",
+           "bspline2": "tab:brown", "bspline2_open": "tab:pink", "gimp": "tab:olive"}
 
 
 @dataclass

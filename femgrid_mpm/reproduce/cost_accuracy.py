@@ -4,7 +4,8 @@ Each sweep (``femgrid_mpm/sweeps/NAME.toml``) runs into ``OUT/NAME/`` as
 ``femgrid-mpm sweep`` runs it (finished runs are reused on a second call) and
 gets its report (``report.md``, ``report.html``, the figures); ``OUT/table.md``
 lists, per sweep, the fitted order of convergence of every basis and mass kind
-with its errors at each spacing.
+with its errors at each spacing, and for the drifting bar the energy balance's
+largest error over the vibration energy (:func:`energy_table`).
 """
 
 from __future__ import annotations
@@ -13,8 +14,12 @@ import math
 from pathlib import Path
 
 #: the sweeps run, in order: the bar and the manufactured solution over every basis and mass
-#: kind, the quasi-static cantilever, and the bar's time-step sweep
-SWEEPS = ("bar_convergence", "manufactured_convergence", "cantilever_convergence", "bar_time_steps")
+#: kind, the quasi-static cantilever, the bar's time-step sweep, and the two where points
+#: cross cells (the manufactured solution at large amplitude, the drifting bar)
+SWEEPS = ("bar_convergence", "manufactured_convergence", "cantilever_convergence", "bar_time_steps",
+          "manufactured_large_convergence", "drifting_bar_convergence")
+#: sweeps of a body that vibrates about a rigid motion: their energy table too
+ENERGY_SWEEPS = ("drifting_bar_convergence",)
 
 
 def planned_runs() -> int:
@@ -40,6 +45,8 @@ def run(out, workers: int | None = None) -> dict:
         run_sweep(plan(read_sweep(path), path), directory, workers=workers)
         write_report(directory)
         orders[name], section = order_table(directory)
+        if name in ENERGY_SWEEPS:
+            section += "\n" + energy_table(directory)
         sections.append(f"## {name}\n\nReport: `{name}/report.md`.\n\n{section}")
     atomic_write(out / "table.md", "\n".join(sections))
     return orders
@@ -75,3 +82,41 @@ def order_table(directory: Path) -> tuple[dict, str]:
         cells = [f"{found[h]:.3g}" if h in found else "" for h in spacings]
         lines.append(f"| {method} | " + " | ".join(cells) + f" | {order:.2f} |")
     return orders, "\n".join(lines) + "\n"
+
+
+def vibration_energy_error(energy_csv: Path) -> float:
+    """The largest ``|total_error|`` of a run's energy record over its largest ``strain``:
+    for a free body vibrating in one mode about a rigid motion, the largest strain energy
+    is the vibration's energy (all of it is strain at the turning points), which the rigid
+    motion's kinetic energy would swamp as a scale."""
+    import csv
+
+    with open(energy_csv, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    error = max(abs(float(row["total_error"])) for row in rows)
+    strain = max(float(row["strain"]) for row in rows)
+    return error / strain if strain > 0 else math.nan
+
+
+def energy_table(directory: Path) -> str:
+    """Markdown: :func:`vibration_energy_error` per (basis, mass) and spacing of a sweep's
+    completed runs (``runs/RUN/energy.csv``)."""
+    from ..sweep import RUNS_FILE, read_runs
+    from ..sweep.runner import RUNS_DIRECTORY
+
+    varied, rows = read_runs(directory / RUNS_FILE)
+    spacings = sorted({float(row["grid.spacing"]) for row in rows}, reverse=True)
+    found: dict[str, dict[float, float]] = {}
+    for row in rows:
+        if row["status"] != "completed":
+            continue
+        method = ", ".join(str(row[key]) for key in varied if key != "grid.spacing")
+        value = vibration_energy_error(directory / RUNS_DIRECTORY / row["run"] / "energy.csv")
+        found.setdefault(method, {})[float(row["grid.spacing"])] = value
+    lines = ["The energy balance's largest error over the vibration energy (the largest strain energy):\n",
+             "| " + " / ".join(k for k in varied if k != "grid.spacing") + " | "
+             + " | ".join(f"h = {h:g}" for h in spacings) + " |",
+             "|---" * (len(spacings) + 1) + "|"]
+    for method, values in found.items():
+        lines.append(f"| {method} | " + " | ".join(f"{values[h]:.3g}" if h in values else "" for h in spacings) + " |")
+    return "\n".join(lines) + "\n"

@@ -1,8 +1,10 @@
 """The vibrating bar, paper section 4, Figs. 4-8, with a period/energy/time table.
 
-Runs the four bases with lumped mass (serendipity under the "warn" policy,
-as the paper ran it despite its negative corner masses) and q1, q2 and
-bspline3 with consistent mass, all in plane strain.
+Runs the paper's four bases with lumped mass (serendipity under the "warn"
+policy, as the paper ran it despite its negative corner masses) and q1, q2
+and bspline3 with consistent mass, all in plane strain; then the bases the
+paper did not have (open-knot cubic and quadratic splines, gimp) with both,
+for their periods next to the paper's.
 """
 
 from __future__ import annotations
@@ -27,10 +29,25 @@ RUNS = [
     ("q1", "consistent"),
     ("q2", "consistent"),
     ("bspline3", "consistent"),
+    ("bspline3_open", "lumped"),
+    ("bspline3_open", "consistent"),
+    ("bspline2", "lumped"),
+    ("bspline2", "consistent"),
+    ("bspline2_open", "lumped"),
+    ("bspline2_open", "consistent"),
+    ("gimp", "lumped"),
+    ("gimp", "consistent"),
 ]
+#: a run's own settings: gimp with consistent mass takes the weak-node lumping of
+#: docs/bases.md (at the default 0.01 the top row of points, whose squares end on the
+#: grid's top line, reaches the ghost row as the bar thickens, and the energy runs away
+#: at t = 1.9 s)
+SETTINGS = {("gimp", "consistent"): {"solver.weak_fraction": 0.1}}
 #: the paper's figure number for each basis' lumped-mass energy plot
 PAPER_FIGURE = {"q1": 4, "serendipity": 5, "q2": 6, "bspline3": 7}
-NAMES = {"q1": "4-node (q1)", "serendipity": "8-node serendipity", "q2": "9-node (q2)", "bspline3": "cubic splines"}
+NAMES = {"q1": "4-node (q1)", "serendipity": "8-node serendipity", "q2": "9-node (q2)", "bspline3": "cubic splines",
+         "bspline3_open": "cubic splines, open knots", "bspline2": "quadratic splines",
+         "bspline2_open": "quadratic splines, open knots", "gimp": "GIMP"}
 
 
 #: the one figure of lumped against consistent mass, per basis with both
@@ -66,7 +83,7 @@ def run(out_dir) -> dict:
     }
     rows, runs = [], {}
     for basis, mass in RUNS:
-        period, result, wall = simulate(basis, mass)
+        period, result, wall = simulate(basis, mass, **SETTINGS.get((basis, mass), {}))
         energy = result.energy
         total = energy["total"]
         runs[(basis, mass)] = energy
@@ -83,11 +100,16 @@ def run(out_dir) -> dict:
             "wall_time": wall,
         }
         rows.append(record)
-        if mass == "lumped":
+        stopped = None if result.status == "completed" else stop_reason(result.message, result.summary["time"])
+        if mass == "lumped" and basis in PAPER_FIGURE:
             number = PAPER_FIGURE[basis]
             energy_figure(energy, f"Fig. {number}: vibrating bar, {NAMES[basis]}, lumped mass", out / f"fig{number:02d}_energy_{basis}.png",
-                          stopped=None if result.status == "completed" else stop_reason(result.message, result.summary["time"]))
-    pairs = {f"{NAMES[basis]}": (runs[(basis, "lumped")], runs[(basis, "consistent")]) for basis, mass in RUNS if mass == "consistent"}
+                          stopped=stopped)
+        elif mass == "lumped":
+            energy_figure(energy, f"Vibrating bar, {NAMES[basis]}, lumped mass", out / f"energy_{basis}.png", stopped=stopped)
+    # the paper's bases with both masses (the figure stays readable at three rows)
+    pairs = {f"{NAMES[basis]}": (runs[(basis, "lumped")], runs[(basis, "consistent")])
+             for basis, mass in RUNS if mass == "consistent" and basis in PAPER_FIGURE}
     energy_overlay_figure(pairs, "Vibrating bar: lumped (solid) against consistent (dashed) mass", out / OVERLAY_FIGURE)
     _figure_interpolation_error(runs, out / "fig08_interpolation_error.png")
     negative_masses.figure(out / NEGATIVE_MASS_FIGURE)
@@ -114,6 +136,8 @@ def run(out_dir) -> dict:
         f"{reference['2d_stress']:.4f} s (plane stress); 1D {reference['1d_strain']:.4f} s and "
         f"{reference['1d_stress']:.4f} s.  Energies in J per m of thickness (initial total 0.125).\n\n"
         + markdown_table(header, table)
+        + "".join(f"\n{basis}, {mass}: " + ", ".join(f"`{k} = {v}`" for k, v in settings.items()) + "\n"
+                  for (basis, mass), settings in SETTINGS.items())
     )
     (out / "table.md").write_text(text)
     (out / "results.json").write_text(json.dumps({"reference_periods": reference, "runs": rows}, indent=2))
