@@ -165,3 +165,23 @@ class StressReconstruction:
             weighted_points = (summed * volume)[:, None] * stress
             force -= dNdx.T @ weighted_points[:, [0, 2]] + dNdy.T @ weighted_points[:, [2, 1]]
         return force
+
+    def integration_rows(self, x: np.ndarray, volume: np.ndarray, body: np.ndarray, dNdx: sp.csr_matrix,
+                         dNdy: sp.csr_matrix, moduli: np.ndarray) -> tuple:
+        """The force's integration points as rows (gradients, weights, moduli of each row's body):
+        the Gauss points of the usable cells and the points elsewhere, for the critical step's
+        stiffness ``sum w B^T D B`` (:mod:`femgrid_mpm.stability`).  Where the fit holds the
+        basis' strain that is the stiffness of the force; elsewhere its largest frequency was
+        above the force's in every case measured (docs/accuracy.md), a safe estimate."""
+        _, usable, cell = self.fit(x, volume, np.zeros((len(x), 1)), body)
+        at_gauss = np.repeat(usable, self.n_gauss)
+        summed = ~usable[cell]
+        cells = np.flatnonzero(usable)
+        weights = np.concatenate([volume[summed], np.tile(self.gauss_weights, len(cells))])
+        # each Gauss point takes the moduli of its cell's body (those of any of its points)
+        member = np.zeros(self.n_cells, dtype=np.int64)
+        member[cell] = np.arange(len(x))
+        gauss_moduli = np.repeat(moduli[member[cells]], self.n_gauss, axis=0)
+        return (sp.vstack([dNdx[summed], self.gauss_dNdx[at_gauss]]).tocsr(),
+                sp.vstack([dNdy[summed], self.gauss_dNdy[at_gauss]]).tocsr(),
+                weights, np.concatenate([moduli[summed], gauss_moduli]))
