@@ -202,7 +202,7 @@ SECTIONS = {
     "rollers_reconstructed": lambda: space(ROLLER_CASES, [1 / 8, 1 / 16, 1 / 32], 37.5, rollers=True,
                                            title="Boundaries: the W&G mode with rollers",
                                            **{"solver.force_quadrature": "reconstructed"}),
-    "rollers_auto": lambda: [space(ROLLER_CASES[1:3], [1 / 8, 1 / 16, 1 / 32], None, rollers=True,
+    "rollers_auto": lambda: [space(ROLLER_CASES[:3], [1 / 8, 1 / 16, 1 / 32], None, rollers=True,
                                    title="Boundaries: the W&G mode with rollers", **{"solver.force_quadrature": choice})
                              for choice in ("points", "reconstructed")],
 }
