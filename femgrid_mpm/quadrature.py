@@ -29,6 +29,8 @@ with 2 x 2 points), and the run grows without bound (docs/accuracy.md).
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -87,7 +89,7 @@ class StressReconstruction:
         self.n_gauss = order * order
         # local coordinates: the cell on [-1, 1]^2, where Legendre terms are nearly orthogonal
         self.gauss_terms = polynomial_terms(gx.ravel(), gy.ravel(), degree)  # (n_gauss, n_terms)
-        centres = self.cell_centres()
+        self.centres = centres = self.cell_centres()
         points = (centres[:, None, :] + 0.5 * self.h * np.stack([gx.ravel(), gy.ravel()], axis=-1)[None]).reshape(-1, 2)
         _, dNdx, dNdy = grid.shape_functions(points)
         self.gauss_dNdx, self.gauss_dNdy = dNdx.tocsr(), dNdy.tocsr()
@@ -126,7 +128,7 @@ class StressReconstruction:
         m, k = self.n_terms, values.shape[1]
         points = np.flatnonzero(full[cell])
         rows = cell[points]
-        local = (x[points] - self.cell_centres()[rows]) / (0.5 * self.h)  # the cell on [-1, 1]^2
+        local = (x[points] - self.centres[rows]) / (0.5 * self.h)  # the cell on [-1, 1]^2
         terms = polynomial_terms(local[:, 0], local[:, 1], self.degree)
         weighted = volume[points, None] * terms
         summing = sp.csr_matrix((np.ones(len(rows)), (rows, np.arange(len(rows)))), shape=(self.n_cells, len(rows)))
@@ -147,21 +149,24 @@ class StressReconstruction:
         """The reconstructed field at points ``x`` (each in its own cell's polynomial), shape (n, k)."""
         ij = self.cell_of(x)
         cell = ij[:, 0] * self.cells[1] + ij[:, 1]
-        local = (x - self.cell_centres()[cell]) / (0.5 * self.h)
+        local = (x - self.centres[cell]) / (0.5 * self.h)
         terms = polynomial_terms(local[:, 0], local[:, 1], self.degree)
         return np.einsum("nm,nmk->nk", terms, coefficients[cell])
 
     def force(self, x: np.ndarray, volume: np.ndarray, stress: np.ndarray, body: np.ndarray,
-              dNdx: sp.csr_matrix, dNdy: sp.csr_matrix) -> np.ndarray:
+              point_gradients: Callable[[], tuple]) -> np.ndarray:
         """``-int grad N . sigma`` (n_nodes, 2): Gauss in the usable cells, the points' sum elsewhere.
 
-        ``stress`` holds (xx, yy, xy) per point; ``dNdx``, ``dNdy`` are the points' gradients."""
+        ``stress`` holds (xx, yy, xy) per point; ``point_gradients()`` returns the points'
+        ``dNdx``, ``dNdy``, asked for only if some point is summed (the numba engine builds
+        them on demand)."""
         coefficients, usable, cell = self.fit(x, volume, stress, body)
         at_gauss = np.einsum("gm,cmk->cgk", self.gauss_terms, coefficients)  # zero in the unusable cells
         weighted = (at_gauss * self.gauss_weights[None, :, None]).reshape(-1, 3)
         force = -(self.gauss_dNdx_t @ weighted[:, [0, 2]] + self.gauss_dNdy_t @ weighted[:, [2, 1]])
         summed = ~usable[cell]
         if summed.any():  # the points' own sum where no polynomial is integrated
+            dNdx, dNdy = point_gradients()
             weighted_points = (summed * volume)[:, None] * stress
             force -= dNdx.T @ weighted_points[:, [0, 2]] + dNdy.T @ weighted_points[:, [2, 1]]
         return force

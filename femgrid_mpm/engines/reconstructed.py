@@ -40,7 +40,7 @@ class ReconstructedForce(Engine):
     def internal_force(self, ctx: StepContext, dt: float, materials, body_slices) -> np.ndarray:
         self.engine.internal_force(ctx, dt, materials, body_slices)  # the stress of t + dt at the points
         p = ctx.particles
-        return self.reconstruction.force(p.x, p.volume, p.stress, p.body, ctx.dNdx, ctx.dNdy)
+        return self.reconstruction.force(p.x, p.volume, p.stress, p.body, lambda: (ctx.dNdx, ctx.dNdy))
 
     def to_points(self, ctx: StepContext, dt: float) -> float:
         return self.engine.to_points(ctx, dt)
