@@ -1,7 +1,8 @@
 """The error sources of the MPM step, each measured alone on the manufactured solution.
 
 Usage: ``python experiments/error_sources.py [SECTION ...]`` with sections
-``time``, ``start``, ``quadrature``, ``projection``, ``weak``, ``space``, ``rollers`` (default: all),
+``time``, ``start``, ``quadrature``, ``projection``, ``weak``, ``space``, ``rollers``,
+``rollers_reconstructed``, ``rollers_auto`` (default: all),
 printing one Markdown table per section (the tables of docs/accuracy.md).
 
 The scene is ``scenes/manufactured.toml`` (u_x = A s(x) sin(w t), u_y = -A s(y) sin(w t),
@@ -158,23 +159,31 @@ def weak_nodes(spacing, fractions, steps) -> None:
           ["weak_fraction", "h", "dt (s)", "dt / critical", "error_max whole", "error_max interior"], rows)
 
 
-def space(cases, spacings, steps_per_cell, rollers=False, title="Space") -> None:
-    """Convergence in h at a step proportional to h but small (the time error below the spatial one)."""
+def space(cases, spacings, steps_per_cell, rollers=False, title="Space", **extra) -> None:
+    """Convergence in h at a step proportional to h but small (the time error below the spatial one);
+    ``extra`` scene keys for every run; the wall time per step of the finest run."""
     rows = []
     for basis, mass, points in cases:
-        results = [run(scene(basis, mass, h, points=points, steps=round(steps_per_cell / h), rollers=rollers))
-                   for h in spacings]
+        results = [run(scene(basis, mass, h, points=points, steps=round(steps_per_cell / h) if steps_per_cell else None,
+                             rollers=rollers, **extra)) for h in spacings]
         whole, inner = [r["whole"] for r in results], [r["interior"] for r in results]
         rows.append([f"{basis} {mass} {points}x{points}", *(f"{w:.3g} / {i:.3g}" for w, i in zip(whole, inner)),
                      f"{order(whole[-2], whole[-1])} / {order(inner[-2], inner[-1])}",
-                     f"{max(r['dt'] / r['critical'] for r in results):.3g}"])
-    table(f"{title}: error_max whole / interior, dt = T / ({steps_per_cell:g} / h)",
-          ["basis, mass", *(f"h = 1/{round(1 / h)}" for h in spacings), "order (last two)", "dt / critical (largest)"],
-          rows)
+                     f"{max(r['dt'] / r['critical'] for r in results):.3g}",
+                     f"{1e3 * results[-1]['wall'] / results[-1]['steps']:.2f}"])
+    choices = "".join(f", {key.split('.')[-1]} = {value}" for key, value in extra.items())
+    step = f"dt = T / ({steps_per_cell:g} / h)" if steps_per_cell else "dt = auto (safety 0.5)"
+    table(f"{title}: error_max whole / interior, {step}{choices}",
+          ["basis, mass", *(f"h = 1/{round(1 / h)}" for h in spacings), "order (last two)", "dt / critical (largest)",
+           "ms / step (finest)"], rows)
 
 
 #: basis, mass, h, steps per period (the first near the critical step), more scene keys
 TIME_CASES = [("q1", "lumped", 1 / 16, [20, 40, 80, 160], {}), ("bspline3", "consistent", 1 / 16, [250, 500, 1000], {})]
+
+#: basis, mass, points per cell of the rollers' tables
+ROLLER_CASES = [("bspline3_open", "consistent", 2), ("bspline3_open", "consistent", 3), ("bspline3_open", "consistent", 4),
+                ("q2", "consistent", 2), ("q2", "consistent", 3)]
 
 SECTIONS = {
     "time": lambda: time_integration(TIME_CASES),
@@ -188,9 +197,14 @@ SECTIONS = {
     "weak": lambda: weak_nodes(1 / 16, [0.0, 0.01, 0.05], 600),
     "space": lambda: space([("bspline3", "consistent", 2), ("bspline3_open", "consistent", 2), ("q1", "lumped", 2)],
                            [1 / 8, 1 / 16, 1 / 32], 37.5),
-    "rollers": lambda: space([("bspline3_open", "consistent", 2), ("bspline3_open", "consistent", 3)],
-                             [1 / 8, 1 / 16, 1 / 32], 37.5, rollers=True,
+    "rollers": lambda: space(ROLLER_CASES, [1 / 8, 1 / 16, 1 / 32], 37.5, rollers=True,
                              title="Boundaries: the W&G mode with rollers"),
+    "rollers_reconstructed": lambda: space(ROLLER_CASES, [1 / 8, 1 / 16, 1 / 32], 37.5, rollers=True,
+                                           title="Boundaries: the W&G mode with rollers",
+                                           **{"solver.force_quadrature": "reconstructed"}),
+    "rollers_auto": lambda: [space(ROLLER_CASES[:3], [1 / 8, 1 / 16, 1 / 32], None, rollers=True,
+                                   title="Boundaries: the W&G mode with rollers", **{"solver.force_quadrature": choice})
+                             for choice in ("points", "reconstructed")],
 }
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .bases import BASES
+from .quadrature import StressReconstruction
 
 def bloch_time_step(basis: str, mass: str, spacing: float, wave_speed: float) -> float:
     """The basis' classic estimate (s) for ``"lumped"`` or ``"consistent"`` mass on a grid of
@@ -131,6 +132,11 @@ def critical_time_step(simulation) -> float:
         lam, mu = material.lame_lambda, material.shear_modulus
         moduli[members] = [lam + 2 * mu, lam, lam + 2 * mu, mu]
     mass_model.assemble(N, p.mass, p.volume)
+    volume = p.volume
+    if simulation.scene.solver.force_quadrature == "reconstructed":  # its Gauss points where it integrates
+        points = min(body.points_per_cell for body in simulation.scene.bodies)
+        dNdx, dNdy, volume, moduli = StressReconstruction(grid, points - 1).integration_rows(
+            p.x, p.volume, p.body, dNdx, dNdy, moduli)
     omega_squared = 0.0
     try:
         for members, active, inertia in mass_model.field_inertias(N):
@@ -139,7 +145,7 @@ def critical_time_step(simulation) -> float:
                 free &= ~simulation.fixed.ravel()
             whole = members == slice(None)
             stiffness = stiffness_matrix(dNdx if whole else dNdx[members], dNdy if whole else dNdy[members],
-                                         p.volume[members], moduli[members])[free][:, free]
+                                         volume[members], moduli[members])[free][:, free]
             omega_squared = max(omega_squared, _largest_frequency_squared(inertia, p.mass[members], free, stiffness))
     except (np.linalg.LinAlgError, spla.ArpackError, RuntimeError):
         return 0.0  # a singular consistent mass: some mode has no inertia

@@ -113,6 +113,10 @@ class SolverSpec(_Model):
     second order in dt also when the initial acceleration is not zero; see
     :meth:`femgrid_mpm.solver.Simulation.advance` and docs/accuracy.md).  Both
     have the same critical step (:mod:`femgrid_mpm.stability`).
+    ``force_quadrature``: the internal force as the sum over the points
+    (``"points"``, the paper's Eq. 11) or by Gauss quadrature of a stress fitted
+    to the points in each filled cell (``"reconstructed"``,
+    :mod:`femgrid_mpm.quadrature`): exact at a body's edges on the grid lines.
     """
 
     mass: Literal["lumped", "consistent", "hrz"] = "lumped"
@@ -130,6 +134,8 @@ class SolverSpec(_Model):
     threads: Annotated[int, Field(ge=1, le=256)] = 1
     #: the time integration: the paper's order, or the centred difference (half-step velocities)
     scheme: Literal["paper", "centred"] = "paper"
+    #: the internal force's integral: the points' sum, or Gauss quadrature of a reconstructed stress
+    force_quadrature: Literal["points", "reconstructed"] = "points"
 
 
 class Material(_Model):
@@ -290,6 +296,16 @@ class Scene(_Model):
                 )
             if self.contact is not None and self.contact.kind == "frictional":
                 raise ValueError("solver.negative_mass: 'threshold' is implemented for one shared field, not for 'frictional' contact")
+        if self.solver.force_quadrature == "reconstructed":
+            if BASES[self.grid.basis].sized:
+                raise ValueError(f"solver.force_quadrature: 'reconstructed' needs functions that are polynomials on "
+                                 f"each lattice cell; {self.grid.basis}'s depend on the points' size")
+            if min(body.points_per_cell for body in self.bodies) < 2:
+                raise ValueError("solver.force_quadrature: 'reconstructed' fits a polynomial to a cell's points: "
+                                 "give every body points_per_cell >= 2")
+            if self.contact is not None and self.contact.kind == "frictional":
+                raise ValueError("solver.force_quadrature: 'reconstructed' is implemented for one shared field, "
+                                 "not for 'frictional' contact")
         sizes = sorted({body.points_per_cell for body in self.bodies})
         if BASES[self.grid.basis].sized and len(sizes) > 1:
             # the weights are laid out for one point size (the points' initial spacing)
