@@ -36,6 +36,8 @@ def test_every_bundled_sweep_plans(name):
     """Each sweep of the case reads and every one of its combinations validates (nothing runs)."""
     path = BUNDLED_SWEEPS / f"{name}.toml"
     runs = plan(read_sweep(path), path)
-    # eight bases x three masses x four spacings; the cantilever seven bases (not serendipity) x three spacings
+    # eight bases x three masses x four spacings (x two schemes on rollers); the cantilever seven
+    # bases (not serendipity) x three spacings
     assert len(runs) == {"bar_convergence": 8 * 3 * 4, "manufactured_convergence": 8 * 3 * 4,
-                         "cantilever_convergence": 7 * 3, "bar_time_steps": 16}[name]
+                         "cantilever_convergence": 7 * 3, "bar_time_steps": 16,
+                         "manufactured_rollers": 8 * 3 * 2 * 4}[name]

@@ -35,6 +35,9 @@ class Support(Effect):
         ``fix`` components (odd), plus for the others (even), so that a roller
         (``fix`` the normal) or a clamp (both) holds exactly
         (:mod:`femgrid_mpm.mass.constraint`).  Nodes further out are held at zero.
+        A basis with no column beyond the grid's edge (q1, q2, serendipity, the
+        open-knot splines) has its edge nodes fixed, as with ``"fixed"``: a scene
+        declares its walls once for every basis.
     """
 
     where: str
@@ -45,7 +48,7 @@ class Support(Effect):
     stage = Stage.CONSTRAIN
 
     def bind(self, simulation):
-        if self.ghosts == "mirrored":
+        if self.mirror(simulation.grid) is not None:
             constraint = simulation.constraint
 
             def mirror_nodes(ctx: StepContext) -> None:
@@ -63,9 +66,9 @@ class Support(Effect):
         """The held degrees of freedom; with mirrored ghosts, those on the wall and beyond
         the ghost column (the ghosts follow their images: :meth:`mirror`)."""
         fixed = np.zeros((grid.n_nodes, 2), dtype=bool)
-        if self.ghosts == "mirrored":
-            _, sign = self.mirror(grid)
-            fixed[sign == 0.0] = True
+        mirror = self.mirror(grid)
+        if mirror is not None:
+            fixed[mirror[1] == 0.0] = True
             return fixed
         rows, columns = self._degrees_of_freedom(grid)
         fixed[rows, columns] = True
@@ -73,7 +76,8 @@ class Support(Effect):
 
     def mirror(self, grid) -> tuple[np.ndarray, np.ndarray] | None:
         """``(image, sign)``, each (n_nodes, 2): ``v[n, c] = sign * v[image, c]`` across this
-        wall (:class:`femgrid_mpm.mass.NodeConstraint`); None for fixed ghosts."""
+        wall (:class:`femgrid_mpm.mass.NodeConstraint`); None for fixed ghosts, and on a
+        basis with no column of nodes beyond the grid's edge (then the support fixes)."""
         if self.ghosts != "mirrored":
             return None
         nodes = grid.nodes_where(self.where)
@@ -81,8 +85,7 @@ class Support(Effect):
             raise ValueError(f"support where = {self.where!r} selects no grid node")
         tolerance = 1e-9 * grid.spacing
         if not (np.any(grid.nodes < grid.lower - tolerance) or np.any(grid.nodes > grid.upper + tolerance)):
-            raise ValueError(f"supports ghosts = 'mirrored' needs a basis with a column of nodes beyond the grid's "
-                             f"edge (bspline3, bspline2), not {grid.basis}: fix the edge's nodes instead")
+            return None  # no ghost column (q1, q2, open knots): the edge's nodes are fixed, as "fixed" does
         lattice = grid.lattice_indices
         axis, line, outward = _half_plane(lattice, nodes, self.where)
         low = lattice.min(axis=0)

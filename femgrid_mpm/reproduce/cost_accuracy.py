@@ -13,8 +13,10 @@ import math
 from pathlib import Path
 
 #: the sweeps run, in order: the bar and the manufactured solution over every basis and mass
-#: kind, the quasi-static cantilever, and the bar's time-step sweep
-SWEEPS = ("bar_convergence", "manufactured_convergence", "cantilever_convergence", "bar_time_steps")
+#: kind, the quasi-static cantilever, the bar's time-step sweep, and the manufactured mode on
+#: rollers over every basis, mass kind and scheme
+SWEEPS = ("bar_convergence", "manufactured_convergence", "cantilever_convergence", "bar_time_steps",
+          "manufactured_rollers")
 
 
 def planned_runs() -> int:
