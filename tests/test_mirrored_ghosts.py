@@ -122,3 +122,14 @@ def test_the_engines_agree_with_mirrored_rollers(mass):
             "output.energy": False})
         final.append(Simulation(scene).run().particles.x)
     np.testing.assert_allclose(final[0], final[1], rtol=0, atol=1e-15)
+
+
+def test_a_singular_constrained_consistent_mass_stops_the_run_in_one_line():
+    """One point per cell: the cubic splines' consistent mass is singular, reduced or not; the
+    run stops with the singular-mass message (not a traceback)."""
+    from femgrid_mpm.diagnostics import SimulationStopped
+
+    scene = rollers("bspline3", "consistent", 1 / 8).with_overrides(**{"bodies.0.points_per_cell": 1,
+                                                                        "time.end": 0.01})
+    with pytest.raises(SimulationStopped, match="singular"):
+        Simulation(scene).run()

@@ -104,7 +104,7 @@ class ConstrainedMass(MassModel):
         self.kind = inner.kind
         self.divides_by_row_sums = inner.divides_by_row_sums
         self._free = constraint.free
-        self._factors: list = []
+        self._factors: list | None = None
 
     # what the step and the monitors read: the wrapped model's
     @property
@@ -136,37 +136,48 @@ class ConstrainedMass(MassModel):
         self._reduce()
 
     def _reduce(self) -> None:
-        """``T.T M T``: a diagonal, or a factored matrix per component on its free and
-        active degrees of freedom."""
+        """``T.T M T``: a diagonal now, or (consistent) factored at the step's first solve,
+        where a singular matrix stops the run as the unconstrained solve does."""
+        self._factors = None
         if self.diagonal:
             masses = np.where(self.inner.active, self.inner.nodal_masses(), 0.0)
             folded = self.constraint.fold(np.repeat(masses[:, None], 2, axis=1))
             keep = self._free & (folded > 0.0)
             self._inverse = np.divide(1.0, folded, out=np.zeros_like(folded), where=keep)
-            return
+
+    def _factor(self) -> list:
+        """Per component: the kept (free, non-empty) degrees of freedom, their block of
+        ``T.T M T`` and its SuperLU factors."""
         matrix = sp.csr_matrix(self.inner.inertia(None).matrix)
-        self._factors = []
+        factors = []
         for c in range(2):
             T = self.constraint.matrix(c)
             reduced = (T.T @ matrix @ T).tocsc()
             diagonal = reduced.diagonal()
             keep = np.flatnonzero(self._free[:, c] & (diagonal > 1e-24 * np.max(diagonal, initial=0.0)))
+            block = reduced[keep][:, keep].tocsc()
             try:
-                factors = spla.splu(reduced[keep][:, keep].tocsc())
-            except RuntimeError as error:
+                factors.append((keep, block, spla.splu(block) if keep.size else None))
+            except RuntimeError as error:  # exactly singular
                 raise SingularMassError(f"the consistent mass matrix with mirrored ghost nodes is singular ({error})",
-                                        int(keep[0]) if keep.size else None) from None
-            self._factors.append((keep, factors))
+                                        int(keep[0])) from None
+        return factors
 
     def _reduced_solve(self, folded: np.ndarray) -> np.ndarray:
         if self.diagonal:
             return folded * self._inverse
+        if self._factors is None:
+            self._factors = self._factor()
         solution = np.zeros_like(folded)
-        for c, (keep, factors) in enumerate(self._factors):
-            if keep.size:
-                solution[keep, c] = factors.solve(np.ascontiguousarray(folded[keep, c]))
-        if not np.all(np.isfinite(solution)):
-            raise SingularMassError("the consistent mass matrix with mirrored ghost nodes gave no finite solution")
+        for c, (keep, block, factors) in enumerate(self._factors):
+            if not keep.size:
+                continue
+            rhs = np.ascontiguousarray(folded[keep, c])
+            solution[keep, c] = x = factors.solve(rhs)
+            # SuperLU returns garbage without warning on a nearly singular matrix: check the residual
+            if not np.all(np.isfinite(x)) or np.linalg.norm(block @ x - rhs) > 1e-8 * max(np.linalg.norm(rhs), 1e-300):
+                raise SingularMassError("the consistent mass matrix with mirrored ghost nodes is singular or nearly "
+                                        "so (too few points per cell for the basis, or weakly supported nodes)")
         return solution
 
     def solve(self, rhs: np.ndarray, kind: str = "velocity") -> np.ndarray:
@@ -180,7 +191,7 @@ class ConstrainedMass(MassModel):
         and a uniform motion the constraint allows (along a roller wall) has ``p_rel = 0``,
         ``e = 0`` and stays exact."""
         frame = np.asarray(frame_velocity, dtype=float)
-        momentum = relative_momentum + self.inner.lumped[:, None] * frame
+        momentum = relative_momentum + self.inner.nodal_masses()[:, None] * frame
         excess = (1.0 - self.constraint.sign) * frame
         rhs = relative_momentum + self.apply(excess) if np.any(excess) else relative_momentum
         velocity = self.constraint.unfold(self._reduced_solve(self.constraint.fold(rhs))) + self.constraint.sign * frame
