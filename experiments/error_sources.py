@@ -1,7 +1,7 @@
 """The error sources of the MPM step, each measured alone on the manufactured solution.
 
 Usage: ``python experiments/error_sources.py [SECTION ...]`` with sections
-``time``, ``start``, ``quadrature``, ``projection``, ``weak``, ``space``, ``rollers``,
+``time``, ``start``, ``quadrature``, ``projection``, ``weak``, ``space``, ``rollers``, ``rollers_time``,
 ``rollers_reconstructed``, ``rollers_auto`` (default: all),
 printing one Markdown table per section (the tables of docs/accuracy.md).
 
@@ -46,7 +46,7 @@ ROLLERS = {
     "bodies.0.velocity": ["1e-8*9.934588265796101*sin(pi*x)", "-1e-8*9.934588265796101*sin(pi*y)"],
     "loads": [],
     "supports": [{"where": "x <= 0", "fix": ["x"]}, {"where": "x >= 1", "fix": ["x"]},
-                 {"where": "y <= 0", "fix": ["y"]}, {"where": "y >= 1", "fix": ["y"]}],
+                 {"where": "y <= 0", "fix": ["y"]}, {"where": "y >= 1", "fix": ["y"]}],  # ghosts set by scene()
     "reference.displacement": ["A*sin(pi*x)*sin(w*t)", "-A*sin(pi*y)*sin(w*t)"],
 }
 
@@ -59,8 +59,10 @@ def scene(basis="bspline3", mass="consistent", spacing=1 / 16, points=2, steps=N
     changes.update({"time.dt": PERIOD / steps} if steps else {"time.safety": safety})
     if from_rest:
         changes.update(FROM_REST)
-    if rollers:
+    if rollers:  # "mirrored" (or True) or "fixed" ghost nodes (bases with no ghost column: fixed)
         changes.update(ROLLERS)
+        ghosts = "mirrored" if rollers is True else rollers
+        changes["supports"] = [dict(support, ghosts=ghosts) for support in ROLLERS["supports"]]
     return bundled_scene("manufactured").with_overrides(**changes)
 
 
@@ -163,11 +165,13 @@ def space(cases, spacings, steps_per_cell, rollers=False, title="Space", **extra
     """Convergence in h at a step proportional to h but small (the time error below the spatial one);
     ``extra`` scene keys for every run; the wall time per step of the finest run."""
     rows = []
-    for basis, mass, points in cases:
+    for basis, mass, points, *ghosts in cases:  # ghosts: the rollers' ("mirrored" unless given)
+        walls = (ghosts[0] if ghosts else "mirrored") if rollers else False
         results = [run(scene(basis, mass, h, points=points, steps=round(steps_per_cell / h) if steps_per_cell else None,
-                             rollers=rollers, **extra)) for h in spacings]
+                             rollers=walls, **extra)) for h in spacings]
         whole, inner = [r["whole"] for r in results], [r["interior"] for r in results]
-        rows.append([f"{basis} {mass} {points}x{points}", *(f"{w:.3g} / {i:.3g}" for w, i in zip(whole, inner)),
+        label = f"{basis} {mass} {points}x{points}" + (f" {walls} ghosts" if walls and basis in GHOST_COLUMN else "")
+        rows.append([label, *(f"{w:.3g} / {i:.3g}" for w, i in zip(whole, inner)),
                      f"{order(whole[-2], whole[-1])} / {order(inner[-2], inner[-1])}",
                      f"{max(r['dt'] / r['critical'] for r in results):.3g}",
                      f"{1e3 * results[-1]['wall'] / results[-1]['steps']:.2f}"])
@@ -177,6 +181,9 @@ def space(cases, spacings, steps_per_cell, rollers=False, title="Space", **extra
           ["basis, mass", *(f"h = 1/{round(1 / h)}" for h in spacings), "order (last two)", "dt / critical (largest)",
            "ms / step (finest)"], rows)
 
+
+#: the bases with a column of nodes beyond the grid's edge, where the rollers' ghosts matter
+GHOST_COLUMN = ("bspline3", "bspline2", "gimp")
 
 #: basis, mass, h, steps per period (the first near the critical step), more scene keys
 TIME_CASES = [("q1", "lumped", 1 / 16, [20, 40, 80, 160], {}), ("bspline3", "consistent", 1 / 16, [250, 500, 1000], {})]
@@ -197,8 +204,13 @@ SECTIONS = {
     "weak": lambda: weak_nodes(1 / 16, [0.0, 0.01, 0.05], 600),
     "space": lambda: space([("bspline3", "consistent", 2), ("bspline3_open", "consistent", 2), ("q1", "lumped", 2)],
                            [1 / 8, 1 / 16, 1 / 32], 37.5),
-    "rollers": lambda: space(ROLLER_CASES, [1 / 8, 1 / 16, 1 / 32], 37.5, rollers=True,
+    "rollers": lambda: space([("bspline3_open", "consistent", 2), ("bspline3_open", "consistent", 3),
+                              ("bspline3", "consistent", 2, "fixed"), ("bspline3", "consistent", 2),
+                              ("bspline2", "consistent", 2), ("bspline3", "lumped", 2)],
+                             [1 / 8, 1 / 16, 1 / 32], 37.5, rollers=True,
                              title="Boundaries: the W&G mode with rollers"),
+    "rollers_time": lambda: space([("bspline3", "consistent", 2)], [1 / 8, 1 / 16, 1 / 32], 150, rollers=True,
+                                  title="Boundaries: the W&G mode with mirrored rollers, a step 4x smaller"),
     "rollers_reconstructed": lambda: space(ROLLER_CASES, [1 / 8, 1 / 16, 1 / 32], 37.5, rollers=True,
                                            title="Boundaries: the W&G mode with rollers",
                                            **{"solver.force_quadrature": "reconstructed"}),

@@ -30,7 +30,7 @@ from .observers import EnergyBookkeeping, kinetic_energy
 from .effects.base import ForceNotFinite, Recorder
 from .engines import engine_for
 from .grid import Grid
-from .mass import CellMasses, MassModel, SingularMassError, build_mass_model
+from .mass import CellMasses, MassModel, NodeConstraint, SingularMassError, build_mass_model
 from .materials import make_material
 from .particles import seed_bodies, warn_of_overlaps, warn_of_thin_bodies
 from .result import RunResult, run_result
@@ -69,6 +69,9 @@ class Simulation:
         # supports must be known to a coupled mass, and to the critical time step
         held = [fixed for fixed in (effect.fixed(self.grid) for effect in acting) if fixed is not None]
         self.fixed = np.logical_or.reduce(held) if held else None
+        # walls of mirrored ghost nodes: the mass solves on v = T w (None: no such wall, no cost)
+        mirrors = [mirror for mirror in (effect.mirror(self.grid) for effect in acting) if mirror is not None]
+        self.constraint = NodeConstraint.combine(self.grid.n_nodes, self.fixed, mirrors) if mirrors else None
         self.dt = self._time_step()
         self.mass: MassModel = self.mass_model(time_step=self.dt)
         self.negative_mass = NegativeMassMonitor(scene.solver.negative_mass, applies=self.mass.divides_by_row_sums)
@@ -116,7 +119,7 @@ class Simulation:
         freedom (the run's own, with its ``time_step``; the critical step estimates on one
         of its own, with None)."""
         return build_mass_model(self.scene.solver, self.grid, self.cell_masses, per_body=self.fields_per_body,
-                                fixed=self.fixed, time_step=time_step)
+                                fixed=self.fixed, time_step=time_step, constraint=self.constraint)
 
     def _time_step(self) -> float:
         time = self.scene.time

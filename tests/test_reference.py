@@ -16,7 +16,7 @@ from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
 
 SCENES_WITH_REFERENCE = ("vibrating_bar_exact", "manufactured", "cantilever_quasistatic", "manufactured_large",
-                         "drifting_bar")
+                         "drifting_bar", "manufactured_rollers")
 
 
 def test_a_rigid_motion_has_no_error_and_a_wrong_reference_the_error_it_should(block_scene):
@@ -105,6 +105,23 @@ def test_a_bundled_reference_starts_at_the_scene_initial_state(name):
     step = 1e-6 * scene.time.end
     velocity = (exact(x, y, step) - exact(x, y, -step)) / (2 * step)
     assert np.abs(velocity - p.v).max() <= 1e-6 * np.abs(p.v).max()
+
+
+def test_the_rollers_mode_is_free_and_on_rollers_by_finite_differences():
+    """scenes/manufactured_rollers.toml: with nu = 0, rho u_tt = E u_xx (and the same in y) with no
+    body force, to 1e-6 relative (central differences, step 1e-4), and u_x = 0 on x = 0, 1."""
+    scene = bundled_scene("manufactured_rollers")
+    exact = scene.reference.exact()
+    material = scene.bodies[0].material
+    x, y = np.meshgrid(np.linspace(0.05, 0.95, 7), np.linspace(0.05, 0.95, 7))
+    x, y, t, d = x.ravel(), y.ravel(), 0.3, 1e-4
+    u_tt = (exact(x, y, t + d) - 2 * exact(x, y, t) + exact(x, y, t - d)) / d**2
+    u_xx = (exact(x + d, y, t) - 2 * exact(x, y, t) + exact(x - d, y, t)) / d**2
+    u_yy = (exact(x, y + d, t) - 2 * exact(x, y, t) + exact(x, y - d, t)) / d**2
+    balance = material.density * u_tt - material.E * np.column_stack([u_xx[:, 0], u_yy[:, 1]])
+    assert np.abs(balance).max() <= 1e-6 * material.density * np.abs(u_tt).max()
+    edges = np.array([0.0, 1.0])
+    assert np.abs(exact(edges, np.array([0.3, 0.7]), t)[:, 0]).max() < 1e-24
 
 
 def test_the_manufactured_body_force_balances_its_displacement_by_finite_differences():

@@ -8,7 +8,8 @@ the one :class:`~femgrid_mpm.step.Stage` it acts at, and
 finding a point) is done once.  An effect that holds degrees of freedom at
 zero for the whole run says so in :meth:`Effect.fixed`: a consistent mass
 couples the nodes, so its solve must leave them out rather than zero them
-after, and the critical time step must leave them out too.
+after, and the critical time step must leave them out too.  One that ties nodes to
+their mirror images (:meth:`Effect.mirror`) makes the mass solve on the reduced velocity.
 
 Adding an effect: one class here in ``effects/``, one line in
 ``effects/__init__.py``'s registry, one test that runs it alone.
@@ -47,6 +48,12 @@ class Effect(abc.ABC):
     def fixed(self, grid) -> np.ndarray | None:
         """(n_nodes, 2) bool: the degrees of freedom held at zero for the whole run, or
         None if this effect holds none."""
+        return None
+
+    def mirror(self, grid) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(image, sign)``, each (n_nodes, 2) (a wall of mirrored ghost nodes, the
+        velocity ``v[n, c] = sign * v[image, c]``: :class:`femgrid_mpm.mass.NodeConstraint`),
+        or None if this effect ties no node to another."""
         return None
 
 

@@ -18,6 +18,7 @@ declares in ``assembly`` (:class:`~.protocol.Assembly`).
 ``sparse.py``          compiled products of the matrix with nodal vectors
 ``exclusion.py``       weak-node lumping and exclusion, in place on the fixed pattern
 ``scale.py``           :class:`CellMasses`: a full cell of the material at each node, the scale of "empty"
+``constraint.py``      mirrored ghost nodes: ``v = T w`` and the mass ``T.T M T`` (:class:`ConstrainedMass`)
 =====================  ==========================================================
 """
 
@@ -26,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from .consistent import DIRECT_LIMIT, ConsistentMass
+from .constraint import ConstrainedMass, NodeConstraint
 from .diagonal import HrzMass, LumpedMass, positive_weights
 from .per_body import FieldLumpedMass
 from .preconditioners import tensor_preconditioner
@@ -33,13 +35,14 @@ from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
 from .scale import CellMasses
 
 __all__ = [
-    "Assembly", "CellMasses", "ConsistentMass", "DIRECT_LIMIT", "FieldLumpedMass", "HrzMass", "Inertia", "LumpedMass", "MassModel",
+    "Assembly", "CellMasses", "ConsistentMass", "ConstrainedMass", "NodeConstraint", "DIRECT_LIMIT", "FieldLumpedMass", "HrzMass", "Inertia", "LumpedMass", "MassModel",
     "NodalSums", "SingularMassError", "build_mass_model", "positive_weights", "tensor_preconditioner",
 ]
 
 
 def build_mass_model(solver, grid, cells: CellMasses, per_body: bool = False,
-                     fixed: np.ndarray | None = None, time_step: float | None = None) -> MassModel:
+                     fixed: np.ndarray | None = None, time_step: float | None = None,
+                     constraint: NodeConstraint | None = None) -> MassModel:
     """The mass model a scene's ``[solver]`` table asks for, complete.
 
     Parameters
@@ -54,9 +57,23 @@ def build_mass_model(solver, grid, cells: CellMasses, per_body: bool = False,
         Degrees of freedom the supports hold at zero.
     time_step : float, optional
         The run's step (s), for CG's first guess (None: an estimate's model).
+    constraint : NodeConstraint, optional
+        Mirrored ghost nodes (supports with ``ghosts = "mirrored"``), the held degrees
+        of freedom included: the model solves on ``v = T w`` (:mod:`.constraint`).
     """
+    if constraint is not None:
+        if per_body:
+            raise ValueError("supports with ghosts = 'mirrored' need one shared velocity field (not frictional contact)")
+        inner = _unconstrained(solver, grid, cells, time_step, solves=False)
+        return ConstrainedMass(inner, constraint, diagonal=not isinstance(inner, ConsistentMass))
     if per_body:
         return FieldLumpedMass(grid.n_nodes, cells)
+    return _unconstrained(solver, grid, cells, time_step, fixed)
+
+
+def _unconstrained(solver, grid, cells: CellMasses, time_step: float | None, fixed: np.ndarray | None = None,
+                   solves: bool = True) -> MassModel:
+    """The shared field's model of the scene's kind."""
     if solver.mass == "hrz":
         return HrzMass(grid.n_nodes, cells)
     if solver.mass == "lumped":
@@ -79,4 +96,5 @@ def build_mass_model(solver, grid, cells: CellMasses, per_body: bool = False,
         lattice=None if grid.nonnegative else grid.lattice_indices,
         layer_width=round(grid.discretization.element_width / grid.spacing),  # in lattice steps
         time_step=time_step,
+        solves=solves,
     )

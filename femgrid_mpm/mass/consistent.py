@@ -90,6 +90,9 @@ class ConsistentMass(MassModel):
     time_step : float, optional
         The step (s): CG's first guess of the velocity is the last step's
         grid velocity advanced by its acceleration.
+    solves : bool
+        Make the solve's systems (False: only ``M`` is assembled, for a model
+        that solves a reduced form of it, :class:`.constraint.ConstrainedMass`).
     """
 
     n_nodes: int
@@ -106,6 +109,7 @@ class ConsistentMass(MassModel):
     lattice: np.ndarray | None = field(default=None, repr=False)
     layer_width: int = 2
     time_step: float | None = None
+    solves: bool = True
     kind = "consistent"
     assembly = Assembly(node_volume=True, matrix=True)
     iterations: int = 0
@@ -170,6 +174,8 @@ class ConsistentMass(MassModel):
                 else:  # in place, keeping the structure
                     _lump_couplings_in_place(matrix.indptr, matrix.indices, matrix.data, diagonal_index, weak)
         self._assembled, self._correction, self._full = matrix, None, None
+        if not self.solves:
+            return
         # empty and fixed degrees of freedom leave the system (identity rows);
         # one system for both components when they are fixed alike
         excluded = ~self.active[:, None] if self.fixed is None else (~self.active[:, None] | self.fixed)
