@@ -41,9 +41,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from .cg import _preconditioned_cg, initial_guess
-from .direct import PIVOT_RATIO, _direct_solve, _pivots, _rows_and_block, _smallest_pivot_node
+from .direct import PIVOT_RATIO, _direct_solve, _factor, _pivots, _rows_and_block, _smallest_pivot_node
 from .exclusion import _exclude_in_place, _lump_couplings, _lump_couplings_in_place, _unexcluded_product
 from .preconditioners import TensorPreconditioner, _near_empty_nodes
+from .reused import ReusedFactors
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
 from .scale import CellMasses
 from .sparse import _CompiledCSR
@@ -119,14 +120,19 @@ class ConsistentMass(MassModel):
         # entries it overwrote), and M rebuilt from them on demand (:attr:`matrix`)
         self._assembled, self._correction, self._full = None, None, None
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
+        # "auto" below DIRECT_LIMIT: the factors kept from an earlier step, per system's columns
+        self._kept: dict[tuple, ReusedFactors] = {}
 
     def state(self) -> tuple[dict, dict]:
         """What carries from step to step, ``(arrays, values)``: CG's warm-start
         history (the last two solutions of each kind) and the counters."""
         arrays = {f"previous.{kind}.{index}": solution
                   for kind, history in self._previous.items() for index, solution in enumerate(history)}
+        for columns, kept in self._kept.items():
+            arrays.update({f"kept.{_key(columns)}.{name}": array for name, array in kept.arrays().items()})
         values = {"iterations": self.iterations, "weak_nodes": self.weak_nodes, "blended_steps": self.blended_steps,
-                  "previous": {kind: len(history) for kind, history in self._previous.items()}}
+                  "previous": {kind: len(history) for kind, history in self._previous.items()},
+                  "kept": [_key(columns) for columns in self._kept]}
         return arrays, values
 
     def restore(self, arrays: dict, values: dict) -> None:
@@ -135,6 +141,12 @@ class ConsistentMass(MassModel):
         self.blended_steps = int(values["blended_steps"])
         self._previous = {kind: tuple(np.array(arrays[f"previous.{kind}.{index}"]) for index in range(count))
                           for kind, count in values["previous"].items()}
+        self._kept = {}
+        for key in values.get("kept", ()):
+            prefix = f"kept.{key}."
+            kept = ReusedFactors.from_arrays({name[len(prefix):]: array for name, array in arrays.items()
+                                              if name.startswith(prefix)})
+            self._kept[kept.columns] = kept
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
         weighted = N.multiply(m_p[:, None]).tocsr()
@@ -178,17 +190,47 @@ class ConsistentMass(MassModel):
         self._direct = self.linear_solver == "direct" or (
             self.linear_solver == "auto" and np.count_nonzero(self.active) <= DIRECT_LIMIT
         )
+        # below DIRECT_LIMIT, "auto" keeps a system's factors while they fit it (see .reused)
+        kept = {columns: self._kept.get(columns) for columns in groups} if self._keeps_factors else {}
+        kept = {columns: factors for columns, factors in kept.items()
+                if factors is not None and factors.fits(excluded[:, columns[0]], self._weak, columns)}
         if diagonal_index is not None and len(groups) == 1:
             # the one system is made from the assembled matrix in place (a copy of its data was
             # ~25 ns per point-step for cubic splines at 1e5 points); M is R with the entries the
             # exclusion overwrote put back
             self._correction = _exclude_in_place(matrix.indptr, matrix.indices, matrix.data, diagonal_index,
                                                  excluded[:, 0])
-            self._systems = [_System.build(matrix, [0, 1], excluded[:, 0], self._direct, diagonal_index,
-                                           in_place=True)]
+            self._systems = [_System.build(matrix, [0, 1], excluded[:, 0], self._direct and not kept,
+                                           diagonal_index, in_place=True)]
         else:
-            self._systems = [_System.build(matrix, list(columns), excluded[:, columns[0]], self._direct,
-                                           diagonal_index) for columns in groups]
+            self._systems = [_System.build(matrix, list(columns), excluded[:, columns[0]],
+                                           self._direct and columns not in kept, diagonal_index)
+                             for columns in groups]
+        if self._keeps_factors:
+            self._kept = kept
+            for system in self._systems:
+                system.kept = kept.get(tuple(system.columns))
+                if system.kept is None:
+                    self._keep(system)
+
+    @property
+    def _keeps_factors(self) -> bool:
+        """Whether this step's systems are factored once and kept over the next steps
+        ("auto" below :data:`DIRECT_LIMIT` active nodes)."""
+        return self._direct and self.linear_solver == "auto"
+
+    @property
+    def _keeps_history(self) -> bool:
+        """Whether the solutions are kept for the next step's first guess (CG's)."""
+        return not self._direct or self.linear_solver == "auto"
+
+    def _keep(self, system: "_System") -> None:
+        """Keep a freshly factored system's factors for the next steps (none if it is singular)."""
+        columns = tuple(system.columns)
+        if system.factors is None or system.blended:
+            self._kept.pop(columns, None)
+        else:
+            self._kept[columns] = ReusedFactors.of(system.factors, system.excluded, self._weak, columns)
 
     @property
     def matrix(self) -> sp.csr_matrix:
@@ -221,7 +263,7 @@ class ConsistentMass(MassModel):
         momentum = relative_momentum + self.lumped[:, None] * frame_velocity
         self._frame = np.asarray(frame_velocity, dtype=float)
         velocity = self.solve(relative_momentum, "velocity", frame=self._frame) + frame_velocity
-        if not self._direct:  # the frame of the velocities in the history, for the next guess
+        if self._keeps_history:  # the frame of the velocities in the history, for the next guess
             self._previous["frame"] = (self._frame.reshape(1, 2).copy(),)
         return momentum, velocity
 
@@ -266,7 +308,7 @@ class ConsistentMass(MassModel):
                 continue
             solution[:, system.columns] = self._solve_system(system, part, kind, coupled,
                                                              frame[system.columns] if moving else None)
-        if not self._direct:
+        if self._keeps_history:
             self._previous[kind] = (*self._previous.get(kind, ())[-1:], solution)
         return solution
 
@@ -302,6 +344,7 @@ class ConsistentMass(MassModel):
             if not system.blended:
                 self.blended_steps += 1
             system.blend_with(self._blend_target(), self.blend, self._direct)
+            self._kept.pop(tuple(system.columns), None)  # the next step factors its own matrix
             solution, converged = self._solve(system, right_hand_side(), kind)
             if not converged:
                 raise SingularMassError(f"the blended mass matrix could not be solved either ({kind} system)",
@@ -357,6 +400,14 @@ class ConsistentMass(MassModel):
 
     def _solve(self, system: "_System", rhs: np.ndarray, kind: str) -> tuple[np.ndarray, bool]:
         if self._direct:
+            if system.kept is not None:  # CG preconditioned by an earlier step's factors
+                guess = self._initial_guess(rhs, kind, system)
+                solution, converged, iterations = system.kept.solve(system.matrix, rhs, guess, self.tolerance)
+                self.iterations += iterations
+                if converged:
+                    return solution, True
+                system.kept, system.factors = None, _factor(system.matrix)  # this step's own, and kept
+                self._keep(system)
             return _direct_solve(system.factors, system.matrix, rhs)
         guess = self._initial_guess(rhs, kind, system)
         tensor = None if self.preconditioner is None else self.preconditioner.scaled(system)
@@ -389,3 +440,8 @@ class ConsistentMass(MassModel):
         diagonal = self.matrix.diagonal()
         scale = self.lumped[self.active].sum() / diagonal[self.active].sum()
         return np.where(self.active, scale * diagonal, 1.0)
+
+
+def _key(columns: tuple) -> str:
+    """A system's columns as a checkpoint's name: (0, 1) -> "0-1"."""
+    return "-".join(str(column) for column in columns)
