@@ -30,7 +30,9 @@ singular matrix.  ``"cg"`` is preconditioned CG (:mod:`.cg`; Jacobi, or for
 cubic splines a tensor Gram preconditioner completed by an exact solve in a
 layer along the bodies' edges, :mod:`.preconditioners`), warm-started from
 the last step.  ``"auto"`` takes direct up to 5000 active nodes (exact, and
-its pivots detect a singular matrix; the paper's problems), and CG above.
+its pivots detect a singular matrix; the paper's problems), and CG above;
+below it, the factors are kept over the steps as the preconditioner of CG
+(:mod:`.reused`), refactored when they no longer fit.
 """
 
 from __future__ import annotations
@@ -41,12 +43,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from .cg import _preconditioned_cg, initial_guess
-from .direct import PIVOT_RATIO, _direct_solve, _factor, _pivots, _rows_and_block, _smallest_pivot_node
+from .direct import _direct_solve, _factor, _smallest_pivot_node
 from .exclusion import _exclude_in_place, _lump_couplings, _lump_couplings_in_place, _unexcluded_product
-from .preconditioners import TensorPreconditioner, _near_empty_nodes
-from .reused import ReusedFactors
+from .preconditioners import TensorPreconditioner
+from .reused import ReusedFactors, kept_arrays, restore_kept
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
 from .scale import CellMasses
+from .singular import singular_near_edges
 from .sparse import _CompiledCSR
 from .system import _System
 
@@ -128,11 +131,10 @@ class ConsistentMass(MassModel):
         history (the last two solutions of each kind) and the counters."""
         arrays = {f"previous.{kind}.{index}": solution
                   for kind, history in self._previous.items() for index, solution in enumerate(history)}
-        for columns, kept in self._kept.items():
-            arrays.update({f"kept.{_key(columns)}.{name}": array for name, array in kept.arrays().items()})
+        arrays.update(kept_arrays(self._kept))
         values = {"iterations": self.iterations, "weak_nodes": self.weak_nodes, "blended_steps": self.blended_steps,
                   "previous": {kind: len(history) for kind, history in self._previous.items()},
-                  "kept": [_key(columns) for columns in self._kept]}
+                  "kept": len(self._kept)}
         return arrays, values
 
     def restore(self, arrays: dict, values: dict) -> None:
@@ -141,12 +143,7 @@ class ConsistentMass(MassModel):
         self.blended_steps = int(values["blended_steps"])
         self._previous = {kind: tuple(np.array(arrays[f"previous.{kind}.{index}"]) for index in range(count))
                           for kind, count in values["previous"].items()}
-        self._kept = {}
-        for key in values.get("kept", ()):
-            prefix = f"kept.{key}."
-            kept = ReusedFactors.from_arrays({name[len(prefix):]: array for name, array in arrays.items()
-                                              if name.startswith(prefix)})
-            self._kept[kept.columns] = kept
+        self._kept = restore_kept(arrays, values.get("kept", 0))
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
         weighted = N.multiply(m_p[:, None]).tocsr()
@@ -333,9 +330,8 @@ class ConsistentMass(MassModel):
             solution, converged = self._solve(system, right_hand_side(), kind)
         if not converged:
             if self.fallback != "blend":
-                how = ("the direct solve left a large residual" if self._direct else
-                       "its block near the bodies' edges has a singular pivot" if system.singular else
-                       "CG did not converge")
+                how = ("its block near the bodies' edges has a singular pivot" if system.singular else
+                       "the direct solve left a large residual" if self._direct else "CG did not converge")
                 raise SingularMassError(
                     f"the consistent mass matrix is singular or nearly so: {how} on the {kind} system "
                     f"(too few points per cell for the basis, or weakly supported nodes); use more points "
@@ -352,40 +348,11 @@ class ConsistentMass(MassModel):
         return solution
 
     def _singular_near_edges(self, system: "_System") -> bool:
-        """Whether CG's system is singular, decided as the direct solver decides, for a
-        signed basis (q2, serendipity): by SuperLU's pivots (:data:`PIVOT_RATIO`) of its
-        block on the kept nodes within one element of an empty node or of the grid's
-        edge, once per step.
-
-        CG alone does not see it.  A momentum ``N.T (m v)`` (and gravity's
-        ``N.T (m g)``) lies in the range of ``M = N.T diag(m) N``, so CG solves
-        such a system even where M is singular, and the solution keeps whatever
-        its first guess held in M's null space: that moves no point but changes
-        the velocity gradient.  Where q2 and serendipity elements were partly
-        filled, CG's stresses differed from the direct solver's by O(1) after
-        one step (it blended the acceleration solve only, when the force had a
-        part in the null space).  A null vector vanishes on the nodes of every
-        element whose points determine its polynomials, so it lives on partly
-        filled elements, next to empty nodes or the grid's edge; and M being positive
-        semi-definite, M is singular along a vector of the block exactly when
-        the block is.  (A body too sparse everywhere, fewer points per element
-        than functions, is singular in its interior: only the direct solver
-        finds that.)  Non-negative bases lump their weakly supported nodes
-        instead (:meth:`_prepare`) and are not checked.
-        """
-        if self._direct or self.nonnegative or system.blended or self.lattice is None:
+        """Whether CG's system is singular near the bodies' edges (:func:`.singular.singular_near_edges`);
+        also CG on kept factors: a matrix that became singular since they were made does not stop it."""
+        if (self._direct and system.kept is None) or self.nonnegative or system.blended or self.lattice is None:
             return False
-        if system.singular is None:
-            system.singular, system.weakest = False, None
-            layer = _near_empty_nodes(self.lattice, ~self.active, self.layer_width) & ~system.excluded
-            nodes = np.flatnonzero(layer)
-            if nodes.size:
-                pivots = _pivots(_rows_and_block(system.matrix, nodes)[1])
-                if pivots is None:
-                    system.singular = True
-                elif np.min(pivots[1]) < PIVOT_RATIO:
-                    system.singular, system.weakest = True, int(nodes[pivots[2][np.argmin(pivots[1])]])
-        return system.singular
+        return singular_near_edges(system, self.lattice, self.active, self.layer_width)
 
     def _weakest_node(self, system: "_System", rhs: np.ndarray, solution: np.ndarray) -> int | None:
         """Where a failed solve's matrix is weakest (for the stop's message): the node of the
@@ -440,8 +407,3 @@ class ConsistentMass(MassModel):
         diagonal = self.matrix.diagonal()
         scale = self.lumped[self.active].sum() / diagonal[self.active].sum()
         return np.where(self.active, scale * diagonal, 1.0)
-
-
-def _key(columns: tuple) -> str:
-    """A system's columns as a checkpoint's name: (0, 1) -> "0-1"."""
-    return "-".join(str(column) for column in columns)

@@ -111,26 +111,67 @@ class ReusedFactors:
         return out
 
 
+def kept_arrays(kept: dict) -> dict:
+    """The kept factors of each system as a checkpoint's arrays (:func:`restore_kept`)."""
+    return {f"kept.{index}.{name}": array for index, factors in enumerate(kept.values())
+            for name, array in factors.arrays().items()}
+
+
+def restore_kept(arrays: dict, count: int) -> dict:
+    """:func:`kept_arrays` taken back: ``{columns: ReusedFactors}``."""
+    kept = {}
+    for index in range(count):
+        prefix = f"kept.{index}."
+        factors = ReusedFactors.from_arrays({name[len(prefix):]: array for name, array in arrays.items()
+                                             if name.startswith(prefix)})
+        kept[factors.columns] = factors
+    return kept
+
+
 @compiled()
 def _apply_factors(r, z, work, lower_indptr, lower_indices, lower_data, upper_indptr, upper_indices, upper_data,
                    upper_diagonal, row_permutation, column_permutation):
-    """``z = Pc U^-1 L^-1 Pr r`` column by column (``work`` of r's shape)."""
+    """``z = Pc U^-1 L^-1 Pr r`` column by column (``work`` of r's shape).
+
+    Two columns take a loop of their own, its positions unsigned (numba tests a signed
+    index for Python's wraparound on every access): the triangular solves are most of
+    an iteration, their factors holding ~5x the matrix's entries."""
     n, k = r.shape
     for i in range(n):
         for c in range(k):
             work[row_permutation[i], c] = r[i, c]
-    for j in range(n):  # L (unit diagonal) by columns, forward
-        for entry in range(lower_indptr[j], lower_indptr[j + 1]):
-            i = lower_indices[entry]
+    if k == 2:
+        for j in range(n):  # L (unit diagonal) by columns, forward
+            w0 = work[j, 0]
+            w1 = work[j, 1]
+            for entry in range(np.uint64(lower_indptr[j]), np.uint64(lower_indptr[j + 1])):
+                i = np.uint64(lower_indices[entry])
+                d = lower_data[entry]
+                work[i, 0] = fused(-d, w0, work[i, 0])
+                work[i, 1] = fused(-d, w1, work[i, 1])
+        for j in range(n - 1, -1, -1):  # U by columns, backward
+            w0 = work[j, 0] / upper_diagonal[j]
+            w1 = work[j, 1] / upper_diagonal[j]
+            work[j, 0] = w0
+            work[j, 1] = w1
+            for entry in range(np.uint64(upper_indptr[j]), np.uint64(upper_indptr[j + 1])):
+                i = np.uint64(upper_indices[entry])
+                d = upper_data[entry]
+                work[i, 0] = fused(-d, w0, work[i, 0])
+                work[i, 1] = fused(-d, w1, work[i, 1])
+    else:
+        for j in range(n):
+            for entry in range(lower_indptr[j], lower_indptr[j + 1]):
+                i = lower_indices[entry]
+                for c in range(k):
+                    work[i, c] = fused(-lower_data[entry], work[j, c], work[i, c])
+        for j in range(n - 1, -1, -1):
             for c in range(k):
-                work[i, c] = fused(-lower_data[entry], work[j, c], work[i, c])
-    for j in range(n - 1, -1, -1):  # U by columns, backward
-        for c in range(k):
-            work[j, c] = work[j, c] / upper_diagonal[j]
-        for entry in range(upper_indptr[j], upper_indptr[j + 1]):
-            i = upper_indices[entry]
-            for c in range(k):
-                work[i, c] = fused(-upper_data[entry], work[j, c], work[i, c])
+                work[j, c] = work[j, c] / upper_diagonal[j]
+            for entry in range(upper_indptr[j], upper_indptr[j + 1]):
+                i = upper_indices[entry]
+                for c in range(k):
+                    work[i, c] = fused(-upper_data[entry], work[j, c], work[i, c])
     for i in range(n):
         for c in range(k):
             z[i, c] = work[column_permutation[i], c]
