@@ -7,7 +7,8 @@ For each size and basis, on :func:`step.block_scene`'s block (2 x 2 points per
 cell, the vibrating bar's cosine velocity, its own step ``0.1 h / c``):
 
 * per step: the median time of a consistent step (default ``linear_solver =
-  "auto"``) and of a lumped one, the fastest of :data:`step.ROUNDS` bursts that go
+  "auto"``), of a lumped one, and of a consistent one factored every step
+  (``"direct"``), the fastest of :data:`step.ROUNDS` bursts that go
   round all the size's cases (:func:`step.fastest`), and their ratio;
 * to the same end time: the same block with ``dt = "auto"`` (each mass's own
   critical step, which is smaller for consistent mass) run to :data:`TRANSITS`
@@ -31,7 +32,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from step import block_scene, fastest, warm_up  # noqa: E402
+from step import block_scene, fastest  # noqa: E402
 
 from femgrid_mpm.diagnostics import SimulationStopped  # noqa: E402
 from femgrid_mpm.solver import Simulation  # noqa: E402
@@ -40,14 +41,30 @@ BASES = ("q1", "q2", "serendipity", "bspline3", "gimp", "bspline2")
 SIZES = (1_000, 10_000, 100_000)
 #: the end time of the runs to the same end time, in a cell's wave transit times h / c
 TRANSITS = 20
+#: steps a case must run at the block's step before it is timed
+TRIAL_STEPS = 20
 WAVE_SPEED = float(np.sqrt(1e4 * 0.7 / (1.3 * 0.4) / 1e3))  # the block's p-wave speed (step.block_scene)
 
 
 def per_step(bases, n: int, budget: float) -> dict:
-    """(basis, mass) -> seconds per step at about ``n`` points."""
-    cases = {(basis, mass): warm_up(Simulation(block_scene(basis, mass, n)))
-             for basis in bases for mass in ("lumped", "consistent")}
-    return fastest(cases, budget)
+    """(basis, mass) -> seconds per step at about ``n`` points, mass "direct" the consistent
+    mass factored every step (``linear_solver = "direct"``, what "auto" did before it kept
+    the factors); NaN for a case that stops within
+    :data:`TRIAL_STEPS` steps at the block's step (consistent bspline2: its critical step is
+    below ``0.1 h / c``)."""
+    cases, stopped = {}, {}
+    for basis in bases:
+        for mass in ("lumped", "consistent", "direct"):
+            scene = (block_scene(basis, "consistent", n).with_overrides(**{"solver.linear_solver": "direct"})
+                     if mass == "direct" else block_scene(basis, mass, n))
+            simulation = Simulation(scene)
+            try:
+                for _ in range(TRIAL_STEPS):
+                    simulation.advance()
+                cases[basis, mass] = simulation
+            except SimulationStopped:
+                stopped[basis, mass] = np.nan
+    return {**fastest(cases, budget), **stopped}
 
 
 def to_end_time(basis: str, mass: str, n: int) -> tuple[int, float, str]:
@@ -76,15 +93,21 @@ def main(argv=None) -> None:
     for n in sizes:
         seconds = per_step(bases, n, args.budget)
         print(f"about {n:.0e} points:\n")
-        print("| basis | consistent per step | lumped per step | ratio | steps to the end time (consistent / "
+        print("| basis | consistent per step | lumped per step | ratio | factored every step: ratio | steps to the end time (consistent / "
               "lumped) | wall to the end time (consistent / lumped) |")
-        print("|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|")
         for basis in bases:
             consistent, lumped = seconds[basis, "consistent"], seconds[basis, "lumped"]
             (steps_c, wall_c, status_c), (steps_l, wall_l, status_l) = (to_end_time(basis, mass, n)
                                                                          for mass in ("consistent", "lumped"))
             note = "" if status_c == status_l == "completed" else f" ({status_c}; {status_l})"
+            if np.isnan(consistent):
+                print(f"| {basis} | stops at the block's step 0.1 h / c | {1e3 * lumped:.3f} ms | | "
+                      f"| {steps_c} / {steps_l} = {steps_c / max(steps_l, 1):.1f}x "
+                      f"| {wall_c:.2f} / {wall_l:.2f} s = {wall_c / wall_l:.1f}x{note} |", flush=True)
+                continue
             print(f"| {basis} | {1e3 * consistent:.3f} ms | {1e3 * lumped:.3f} ms | {consistent / lumped:.1f}x "
+                  f"| {seconds[basis, 'direct'] / lumped:.1f}x "
                   f"| {steps_c} / {steps_l} = {steps_c / max(steps_l, 1):.1f}x "
                   f"| {wall_c:.2f} / {wall_l:.2f} s = {wall_c / wall_l:.1f}x{note} |", flush=True)
         print()
