@@ -85,6 +85,9 @@ CASES = {
     # consistent mass by CG: its warm start carries over
     "bspline3 consistent cg": (bundled_scene("vibrating_bar").with_overrides(
         **{"grid.basis": "bspline3", "solver.mass": "consistent", "time.end": 0.6}), 50, with_cg),
+    # consistent mass, "auto" below the direct limit: the kept factors carry over
+    "q1 consistent auto": (bundled_scene("vibrating_bar").with_overrides(
+        **{"solver.mass": "consistent", "time.end": 0.6}), 50, None),
     # HRZ, a neo-Hookean body, gravity, a ramped point load and damping: the work ledger in order
     "q2 hrz, loads": (bundled_scene("cantilever_large").with_overrides(
         **{"grid.basis": "q2", "solver.mass": "hrz", "bodies.0.material.model": "neo_hookean", "time.end": 0.6,

@@ -13,6 +13,8 @@ declares in ``assembly`` (:class:`~.protocol.Assembly`).
 ``consistent.py``      :class:`ConsistentMass`: weak nodes, exclusion, the singular fallback
 ``system.py``          one linear system of it (components, exclusions, factors, blend)
 ``direct.py``          SuperLU and its pivots, the test of singularity
+``reused.py``          SuperLU factors kept over steps as CG's preconditioner ("auto", small grids)
+``singular.py``        CG's test of singularity near the edges (signed bases)
 ``cg.py``              preconditioned CG, compiled, and its first guess
 ``preconditioners.py`` the splines' tensor Gram preconditioner and its boundary layer
 ``sparse.py``          compiled products of the matrix with nodal vectors

@@ -30,7 +30,9 @@ singular matrix.  ``"cg"`` is preconditioned CG (:mod:`.cg`; Jacobi, or for
 cubic splines a tensor Gram preconditioner completed by an exact solve in a
 layer along the bodies' edges, :mod:`.preconditioners`), warm-started from
 the last step.  ``"auto"`` takes direct up to 5000 active nodes (exact, and
-its pivots detect a singular matrix; the paper's problems), and CG above.
+its pivots detect a singular matrix; the paper's problems), and CG above;
+below it, the factors are kept over the steps as the preconditioner of CG
+(:mod:`.reused`), refactored when they no longer fit.
 """
 
 from __future__ import annotations
@@ -41,11 +43,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from .cg import _preconditioned_cg, initial_guess
-from .direct import PIVOT_RATIO, _direct_solve, _pivots, _rows_and_block, _smallest_pivot_node
+from .direct import _direct_solve, _factor, _smallest_pivot_node
 from .exclusion import _exclude_in_place, _lump_couplings, _lump_couplings_in_place, _unexcluded_product
-from .preconditioners import TensorPreconditioner, _near_empty_nodes
+from .preconditioners import TensorPreconditioner
+from .reused import ReusedFactors, kept_arrays, restore_kept
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
 from .scale import CellMasses
+from .singular import singular_near_edges
 from .sparse import _CompiledCSR
 from .system import _System
 
@@ -123,14 +127,18 @@ class ConsistentMass(MassModel):
         # entries it overwrote), and M rebuilt from them on demand (:attr:`matrix`)
         self._assembled, self._correction, self._full = None, None, None
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
+        # "auto" below DIRECT_LIMIT: the factors kept from an earlier step, per system's columns
+        self._kept: dict[tuple, ReusedFactors] = {}
 
     def state(self) -> tuple[dict, dict]:
         """What carries from step to step, ``(arrays, values)``: CG's warm-start
         history (the last two solutions of each kind) and the counters."""
         arrays = {f"previous.{kind}.{index}": solution
                   for kind, history in self._previous.items() for index, solution in enumerate(history)}
+        arrays.update(kept_arrays(self._kept))
         values = {"iterations": self.iterations, "weak_nodes": self.weak_nodes, "blended_steps": self.blended_steps,
-                  "previous": {kind: len(history) for kind, history in self._previous.items()}}
+                  "previous": {kind: len(history) for kind, history in self._previous.items()},
+                  "kept": len(self._kept)}
         return arrays, values
 
     def restore(self, arrays: dict, values: dict) -> None:
@@ -139,6 +147,7 @@ class ConsistentMass(MassModel):
         self.blended_steps = int(values["blended_steps"])
         self._previous = {kind: tuple(np.array(arrays[f"previous.{kind}.{index}"]) for index in range(count))
                           for kind, count in values["previous"].items()}
+        self._kept = restore_kept(arrays, values.get("kept", 0))
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
         weighted = N.multiply(m_p[:, None]).tocsr()
@@ -184,17 +193,47 @@ class ConsistentMass(MassModel):
         self._direct = self.linear_solver == "direct" or (
             self.linear_solver == "auto" and np.count_nonzero(self.active) <= DIRECT_LIMIT
         )
+        # below DIRECT_LIMIT, "auto" keeps a system's factors while they fit it (see .reused)
+        kept = {columns: self._kept.get(columns) for columns in groups} if self._keeps_factors else {}
+        kept = {columns: factors for columns, factors in kept.items()
+                if factors is not None and factors.fits(excluded[:, columns[0]], self._weak, columns)}
         if diagonal_index is not None and len(groups) == 1:
             # the one system is made from the assembled matrix in place (a copy of its data was
             # ~25 ns per point-step for cubic splines at 1e5 points); M is R with the entries the
             # exclusion overwrote put back
             self._correction = _exclude_in_place(matrix.indptr, matrix.indices, matrix.data, diagonal_index,
                                                  excluded[:, 0])
-            self._systems = [_System.build(matrix, [0, 1], excluded[:, 0], self._direct, diagonal_index,
-                                           in_place=True)]
+            self._systems = [_System.build(matrix, [0, 1], excluded[:, 0], self._direct and not kept,
+                                           diagonal_index, in_place=True)]
         else:
-            self._systems = [_System.build(matrix, list(columns), excluded[:, columns[0]], self._direct,
-                                           diagonal_index) for columns in groups]
+            self._systems = [_System.build(matrix, list(columns), excluded[:, columns[0]],
+                                           self._direct and columns not in kept, diagonal_index)
+                             for columns in groups]
+        if self._keeps_factors:
+            self._kept = kept
+            for system in self._systems:
+                system.kept = kept.get(tuple(system.columns))
+                if system.kept is None:
+                    self._keep(system)
+
+    @property
+    def _keeps_factors(self) -> bool:
+        """Whether this step's systems are factored once and kept over the next steps
+        ("auto" below :data:`DIRECT_LIMIT` active nodes)."""
+        return self._direct and self.linear_solver == "auto"
+
+    @property
+    def _keeps_history(self) -> bool:
+        """Whether the solutions are kept for the next step's first guess (CG's)."""
+        return not self._direct or self.linear_solver == "auto"
+
+    def _keep(self, system: "_System") -> None:
+        """Keep a freshly factored system's factors for the next steps (none if it is singular)."""
+        columns = tuple(system.columns)
+        if system.factors is None or system.blended:
+            self._kept.pop(columns, None)
+        else:
+            self._kept[columns] = ReusedFactors.of(system.factors, system.excluded, self._weak, columns)
 
     @property
     def matrix(self) -> sp.csr_matrix:
@@ -227,7 +266,7 @@ class ConsistentMass(MassModel):
         momentum = relative_momentum + self.lumped[:, None] * frame_velocity
         self._frame = np.asarray(frame_velocity, dtype=float)
         velocity = self.solve(relative_momentum, "velocity", frame=self._frame) + frame_velocity
-        if not self._direct:  # the frame of the velocities in the history, for the next guess
+        if self._keeps_history:  # the frame of the velocities in the history, for the next guess
             self._previous["frame"] = (self._frame.reshape(1, 2).copy(),)
         return momentum, velocity
 
@@ -272,7 +311,7 @@ class ConsistentMass(MassModel):
                 continue
             solution[:, system.columns] = self._solve_system(system, part, kind, coupled,
                                                              frame[system.columns] if moving else None)
-        if not self._direct:
+        if self._keeps_history:
             self._previous[kind] = (*self._previous.get(kind, ())[-1:], solution)
         return solution
 
@@ -297,9 +336,8 @@ class ConsistentMass(MassModel):
             solution, converged = self._solve(system, right_hand_side(), kind)
         if not converged:
             if self.fallback != "blend":
-                how = ("the direct solve left a large residual" if self._direct else
-                       "its block near the bodies' edges has a singular pivot" if system.singular else
-                       "CG did not converge")
+                how = ("its block near the bodies' edges has a singular pivot" if system.singular else
+                       "the direct solve left a large residual" if self._direct else "CG did not converge")
                 raise SingularMassError(
                     f"the consistent mass matrix is singular or nearly so: {how} on the {kind} system "
                     f"(too few points per cell for the basis, or weakly supported nodes); use more points "
@@ -308,6 +346,7 @@ class ConsistentMass(MassModel):
             if not system.blended:
                 self.blended_steps += 1
             system.blend_with(self._blend_target(), self.blend, self._direct)
+            self._kept.pop(tuple(system.columns), None)  # the next step factors its own matrix
             solution, converged = self._solve(system, right_hand_side(), kind)
             if not converged:
                 raise SingularMassError(f"the blended mass matrix could not be solved either ({kind} system)",
@@ -315,40 +354,11 @@ class ConsistentMass(MassModel):
         return solution
 
     def _singular_near_edges(self, system: "_System") -> bool:
-        """Whether CG's system is singular, decided as the direct solver decides, for a
-        signed basis (q2, serendipity): by SuperLU's pivots (:data:`PIVOT_RATIO`) of its
-        block on the kept nodes within one element of an empty node or of the grid's
-        edge, once per step.
-
-        CG alone does not see it.  A momentum ``N.T (m v)`` (and gravity's
-        ``N.T (m g)``) lies in the range of ``M = N.T diag(m) N``, so CG solves
-        such a system even where M is singular, and the solution keeps whatever
-        its first guess held in M's null space: that moves no point but changes
-        the velocity gradient.  Where q2 and serendipity elements were partly
-        filled, CG's stresses differed from the direct solver's by O(1) after
-        one step (it blended the acceleration solve only, when the force had a
-        part in the null space).  A null vector vanishes on the nodes of every
-        element whose points determine its polynomials, so it lives on partly
-        filled elements, next to empty nodes or the grid's edge; and M being positive
-        semi-definite, M is singular along a vector of the block exactly when
-        the block is.  (A body too sparse everywhere, fewer points per element
-        than functions, is singular in its interior: only the direct solver
-        finds that.)  Non-negative bases lump their weakly supported nodes
-        instead (:meth:`_prepare`) and are not checked.
-        """
-        if self._direct or self.nonnegative or system.blended or self.lattice is None:
+        """Whether CG's system is singular near the bodies' edges (:func:`.singular.singular_near_edges`);
+        also CG on kept factors: a matrix that became singular since they were made does not stop it."""
+        if (self._direct and system.kept is None) or self.nonnegative or system.blended or self.lattice is None:
             return False
-        if system.singular is None:
-            system.singular, system.weakest = False, None
-            layer = _near_empty_nodes(self.lattice, ~self.active, self.layer_width) & ~system.excluded
-            nodes = np.flatnonzero(layer)
-            if nodes.size:
-                pivots = _pivots(_rows_and_block(system.matrix, nodes)[1])
-                if pivots is None:
-                    system.singular = True
-                elif np.min(pivots[1]) < PIVOT_RATIO:
-                    system.singular, system.weakest = True, int(nodes[pivots[2][np.argmin(pivots[1])]])
-        return system.singular
+        return singular_near_edges(system, self.lattice, self.active, self.layer_width)
 
     def _weakest_node(self, system: "_System", rhs: np.ndarray, solution: np.ndarray) -> int | None:
         """Where a failed solve's matrix is weakest (for the stop's message): the node of the
@@ -363,6 +373,14 @@ class ConsistentMass(MassModel):
 
     def _solve(self, system: "_System", rhs: np.ndarray, kind: str) -> tuple[np.ndarray, bool]:
         if self._direct:
+            if system.kept is not None:  # CG preconditioned by an earlier step's factors
+                guess = self._initial_guess(rhs, kind, system)
+                solution, converged, iterations = system.kept.solve(system.matrix, rhs, guess, self.tolerance)
+                self.iterations += iterations
+                if converged:
+                    return solution, True
+                system.kept, system.factors = None, _factor(system.matrix)  # this step's own, and kept
+                self._keep(system)
             return _direct_solve(system.factors, system.matrix, rhs)
         guess = self._initial_guess(rhs, kind, system)
         tensor = None if self.preconditioner is None else self.preconditioner.scaled(system)

@@ -12,6 +12,7 @@ import scipy.sparse as sp
 from .direct import _factor
 from .exclusion import _exclude_in_place
 from .preconditioners import BoundaryLayer
+from .reused import ReusedFactors
 from .sparse import _CompiledCSR
 
 
@@ -31,6 +32,9 @@ class _System:
     #: yet this step) and the node of its smallest pivot (:meth:`ConsistentMass._singular_near_edges`)
     singular: bool | None = None
     weakest: int | None = None
+    #: "auto" below the direct limit: an earlier step's factors that precondition CG on this
+    #: system (:mod:`.reused`), instead of its own ``factors``
+    kept: "ReusedFactors | None" = None
 
     def boundary_layer(self, lattice_shape: tuple, weak: np.ndarray) -> "BoundaryLayer | None":
         """CG's boundary layer (:class:`BoundaryLayer`), built at the first solve of the
@@ -67,4 +71,5 @@ class _System:
         self.inverse_diagonal = 1.0 / self.matrix.diagonal()
         self.factors = _factor(self.matrix) if direct else None
         self.blended = True
+        self.kept = None
         self._layer = False

@@ -1,0 +1,43 @@
+"""The test of singularity of CG's system on a signed basis, near the bodies' edges."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .direct import PIVOT_RATIO, _pivots, _rows_and_block
+from .preconditioners import _near_empty_nodes
+
+
+def singular_near_edges(system, lattice: np.ndarray, active: np.ndarray, layer_width: int) -> bool:
+    """Whether CG's system is singular, decided as the direct solver decides, for a
+    signed basis (q2, serendipity): by SuperLU's pivots (:data:`PIVOT_RATIO`) of its
+    block on the kept nodes within one element of an empty node or of the grid's
+    edge, once per step.
+
+    CG alone does not see it.  A momentum ``N.T (m v)`` (and gravity's
+    ``N.T (m g)``) lies in the range of ``M = N.T diag(m) N``, so CG solves
+    such a system even where M is singular, and the solution keeps whatever
+    its first guess held in M's null space: that moves no point but changes
+    the velocity gradient.  Where q2 and serendipity elements were partly
+    filled, CG's stresses differed from the direct solver's by O(1) after
+    one step (it blended the acceleration solve only, when the force had a
+    part in the null space).  A null vector vanishes on the nodes of every
+    element whose points determine its polynomials, so it lives on partly
+    filled elements, next to empty nodes or the grid's edge; and M being positive
+    semi-definite, M is singular along a vector of the block exactly when
+    the block is.  (A body too sparse everywhere, fewer points per element
+    than functions, is singular in its interior: only the direct solver
+    finds that.)  Non-negative bases lump their weakly supported nodes
+    instead (:meth:`_prepare`) and are not checked.
+    """
+    if system.singular is None:
+        system.singular, system.weakest = False, None
+        layer = _near_empty_nodes(lattice, ~active, layer_width) & ~system.excluded
+        nodes = np.flatnonzero(layer)
+        if nodes.size:
+            pivots = _pivots(_rows_and_block(system.matrix, nodes)[1])
+            if pivots is None:
+                system.singular = True
+            elif np.min(pivots[1]) < PIVOT_RATIO:
+                system.singular, system.weakest = True, int(nodes[pivots[2][np.argmin(pivots[1])]])
+    return system.singular

@@ -1,0 +1,107 @@
+"""The consistent mass solved by CG preconditioned by kept factors ("auto" below the direct
+limit): the solution against a direct solve of the same matrix, and the refactor triggers."""
+
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from femgrid_mpm.mass.direct import _factor
+from femgrid_mpm.mass.reused import REFACTOR_ITERATIONS, ReusedFactors
+from femgrid_mpm.solver import Simulation
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from step import block_scene  # noqa: E402
+
+
+def advanced(basis, linear_solver="auto", steps=6, n=100):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        simulation = Simulation(block_scene(basis, "consistent", n).with_overrides(
+            **{"solver.linear_solver": linear_solver}))
+        for _ in range(steps):
+            simulation.advance()
+    return simulation
+
+
+@pytest.mark.parametrize("basis", ["q1", "q2", "bspline3"])
+def test_kept_factors_solve_to_the_tolerance_of_a_direct_solve(basis):
+    """A later step's matrix solved with the first step's factors: the residual within the
+    CG tolerance, and the error within what that residual allows, ``cond(M) * tol``,
+    against scipy's sparse LU of the same matrix."""
+    simulation = advanced(basis)
+    mass = simulation.mass
+    system = mass._systems[0]
+    assert system.kept is not None  # the steps after the first reuse the factors
+    matrix = sp.csr_matrix(system.matrix)
+    rng = np.random.default_rng(1)
+    rhs = np.where(system.excluded[:, None], 0.0, rng.normal(size=(matrix.shape[0], 2)))
+    reference = spla.spsolve(sp.csc_matrix(matrix), rhs)
+    solution, converged, iterations = system.kept.solve(system.matrix, rhs, np.zeros_like(rhs), mass.tolerance)
+    assert converged  # a random right-hand side from zero: a few iterations
+    residual = np.linalg.norm(matrix @ solution - rhs, axis=0) / np.linalg.norm(rhs, axis=0)
+    assert np.all(residual <= mass.tolerance)
+    condition = np.linalg.cond(matrix.toarray())
+    error = np.linalg.norm(solution - reference, axis=0) / np.linalg.norm(reference, axis=0)
+    assert np.all(error <= condition * mass.tolerance)
+
+
+def test_applying_kept_factors_is_superlus_solve():
+    simulation = advanced("q1", steps=1)
+    system = simulation.mass._systems[0]
+    factors = _factor(system.matrix)
+    kept = ReusedFactors.of(factors, system.excluded, np.zeros(len(system.excluded), bool), system.columns)
+    vector = np.random.default_rng(2).normal(size=(system.matrix.shape[0], 2))
+    np.testing.assert_allclose(kept.apply(vector), factors.solve(vector), rtol=1e-12, atol=1e-12 * np.abs(
+        factors.solve(vector)).max())
+
+
+def test_factors_of_another_matrix_go_stale():
+    """Factors of a matrix far from the one solved take more than REFACTOR_ITERATIONS: stale,
+    and the model then factors its own matrix."""
+    simulation = advanced("q1", steps=2)
+    mass = simulation.mass
+    system = mass._systems[0]
+    matrix = sp.csr_matrix(system.matrix)
+    kept_nodes = ~system.excluded
+    # the same structure, every coupling halved and the diagonal doubled: far from M
+    other = sp.csr_matrix(0.5 * matrix + sp.diags(np.where(kept_nodes, 1.5 * matrix.diagonal(), 0.0)))
+    kept = ReusedFactors.of(_factor(other), system.excluded, mass._weak, system.columns)
+    rhs = np.where(system.excluded[:, None], 0.0, np.ones((matrix.shape[0], 2)))
+    solution, converged, iterations = kept.solve(system.matrix, rhs, np.zeros_like(rhs), mass.tolerance)
+    assert iterations > REFACTOR_ITERATIONS and kept.stale
+    assert not kept.fits(system.excluded, mass._weak, system.columns)
+    # the model's own: a stale factorization is replaced at the next step
+    mass._kept[tuple(system.columns)] = kept
+    simulation.advance()
+    system = mass._systems[0]
+    assert system.kept is None and system.factors is not None
+    assert mass._kept[tuple(system.columns)] is not kept and not mass._kept[tuple(system.columns)].stale
+
+
+def test_factors_do_not_fit_another_set_of_excluded_or_weak_nodes():
+    simulation = advanced("q1", steps=2)
+    mass = simulation.mass
+    system = mass._systems[0]
+    kept = mass._kept[tuple(system.columns)]
+    assert kept.fits(system.excluded, mass._weak, system.columns)
+    excluded = system.excluded.copy()
+    excluded[np.flatnonzero(~excluded)[0]] = True
+    assert not kept.fits(excluded, mass._weak, system.columns)
+    weak = mass._weak.copy()
+    weak[0] = not weak[0]
+    assert not kept.fits(system.excluded, weak, system.columns)
+
+
+@pytest.mark.parametrize("basis", ["q1", "serendipity", "bspline3"])
+def test_a_run_with_kept_factors_stays_near_the_direct_one(basis):
+    """30 steps of the block: the points' velocities within 1e-4 of the largest one against the
+    direct solver's (which factors every step); the kept factors were refactored only rarely."""
+    direct, kept = advanced(basis, "direct", 30), advanced(basis, "auto", 30)
+    scale = np.abs(direct.particles.v).max()
+    assert np.abs(kept.particles.v - direct.particles.v).max() <= 1e-4 * scale
+    assert kept.mass.iterations <= 2 * 30 * REFACTOR_ITERATIONS
