@@ -18,6 +18,7 @@ declares in ``assembly`` (:class:`~.protocol.Assembly`).
 ``sparse.py``          compiled products of the matrix with nodal vectors
 ``exclusion.py``       weak-node lumping and exclusion, in place on the fixed pattern
 ``scale.py``           :class:`CellMasses`: a full cell of the material at each node, the scale of "empty"
+``weak_rows.py``       the rows that set the consistent mass's critical step; the mixed mass
 =====================  ==========================================================
 """
 
@@ -31,6 +32,7 @@ from .per_body import FieldLumpedMass
 from .preconditioners import tensor_preconditioner
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
 from .scale import CellMasses
+from .weak_rows import interior_ratio
 
 __all__ = [
     "Assembly", "CellMasses", "ConsistentMass", "DIRECT_LIMIT", "FieldLumpedMass", "HrzMass", "Inertia", "LumpedMass", "MassModel",
@@ -79,4 +81,7 @@ def build_mass_model(solver, grid, cells: CellMasses, per_body: bool = False,
         lattice=None if grid.nonnegative else grid.lattice_indices,
         layer_width=round(grid.discretization.element_width / grid.spacing),  # in lattice steps
         time_step=time_step,
+        weak_ratio=solver.weak_ratio,
+        interior=interior_ratio(grid) if solver.weak_ratio > 0 and grid.nonnegative else 0.0,
+        mix=solver.mix,
     )

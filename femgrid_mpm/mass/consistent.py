@@ -42,12 +42,13 @@ import scipy.sparse as sp
 
 from .cg import _preconditioned_cg, initial_guess
 from .direct import PIVOT_RATIO, _direct_solve, _pivots, _rows_and_block, _smallest_pivot_node
-from .exclusion import _exclude_in_place, _lump_couplings, _lump_couplings_in_place, _unexcluded_product
+from .exclusion import _exclude_in_place, _unexcluded_product
 from .preconditioners import TensorPreconditioner, _near_empty_nodes
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
 from .scale import CellMasses
 from .sparse import _CompiledCSR
 from .system import _System
+from .weak_rows import lumped_and_mixed, mix_target, weak_by_ratio
 
 #: largest number of active nodes for which "auto" factors the matrix
 DIRECT_LIMIT = 5000
@@ -90,6 +91,11 @@ class ConsistentMass(MassModel):
     time_step : float, optional
         The step (s): CG's first guess of the velocity is the last step's
         grid velocity advanced by its acceleration.
+    weak_ratio, interior : float
+        A node whose ``M_ii / m_i`` is below ``weak_ratio * interior`` (the basis'
+        value inside a body) is weak too (:mod:`.weak_rows`); 0: off.
+    mix : float
+        Lumped weight ``a`` of the mixed mass ``(1 - a) M + a D`` on the whole grid.
     """
 
     n_nodes: int
@@ -106,6 +112,9 @@ class ConsistentMass(MassModel):
     lattice: np.ndarray | None = field(default=None, repr=False)
     layer_width: int = 2
     time_step: float | None = None
+    weak_ratio: float = 0.0
+    interior: float = 0.0
+    mix: float = 0.0
     kind = "consistent"
     assembly = Assembly(node_volume=True, matrix=True)
     iterations: int = 0
@@ -118,6 +127,7 @@ class ConsistentMass(MassModel):
         # the assembled M (or, made into the solve's system in place, that system R and the
         # entries it overwrote), and M rebuilt from them on demand (:attr:`matrix`)
         self._assembled, self._correction, self._full = None, None, None
+        self._consistent, self._mix_excess = None, None  # set by _prepare
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
 
     def state(self) -> tuple[dict, dict]:
@@ -158,17 +168,21 @@ class ConsistentMass(MassModel):
     def _prepare(self, matrix: sp.csr_matrix, node_volume: np.ndarray | None, diagonal_index=None) -> None:
         diagonal = matrix.diagonal() if diagonal_index is None else matrix.data[diagonal_index]
         self.active = diagonal > 1e-24 * self.scale
-        self._weak = np.zeros(self.n_nodes, dtype=bool)
+        self._weak, self.weak_nodes = np.zeros(self.n_nodes, dtype=bool), 0
+        consistent = matrix  # the scipy path makes new matrices: N.T diag(m) N itself stays, for the estimate
         if self.nonnegative and node_volume is not None:
             fraction = np.divide(node_volume, self.node_integrals, out=np.ones(self.n_nodes), where=self.active)
             weak = self.active & (fraction < self.weak_fraction)
+            if self.weak_ratio > 0:
+                weak |= weak_by_ratio(diagonal, self.lumped, self.active, self.weak_ratio * self.interior)
             self.weak_nodes = int(weak.sum())
             self._weak = weak
-            if self.weak_nodes:
-                if diagonal_index is None:
-                    matrix = _lump_couplings(matrix, weak)
-                else:  # in place, keeping the structure
-                    _lump_couplings_in_place(matrix.indptr, matrix.indices, matrix.data, diagonal_index, weak)
+        target = np.where(self.active, mix_target(self.lumped, diagonal, self.active), 0.0) if self.mix > 0 else None
+        matrix = lumped_and_mixed(matrix, diagonal_index, self._weak if self.weak_nodes else None, self.mix, target)
+        # a (L - D): what the mixed mass's diagonal leaves of the row sums (the frame's share, see solve)
+        excess = 0.0 if target is None else self.mix * np.where(self.active, self.lumped - target, 0.0)
+        self._mix_excess = excess if np.any(excess) else None
+        self._consistent = consistent if matrix is not consistent else None
         self._assembled, self._correction, self._full = matrix, None, None
         # empty and fixed degrees of freedom leave the system (identity rows);
         # one system for both components when they are fixed alike
@@ -208,8 +222,11 @@ class ConsistentMass(MassModel):
         return self._full
 
     def inertia(self, N: sp.csr_matrix) -> Inertia:
-        """``M``, weak nodes lumped."""
-        return Inertia(matrix=self.matrix)
+        """``M``, weak nodes lumped and mixed; with ``N.T diag(m) N`` itself when they
+        differ (the grid velocity is projected afresh from the points every step, so the
+        iteration's inverse mass is ``M^-1 M_C M^-1``, see
+        :func:`femgrid_mpm.stability.critical_time_step`).  After :meth:`assemble`."""
+        return Inertia(matrix=self.matrix, consistent=self._consistent)
 
     def summary(self) -> dict:
         return {"consistent_mass": {"cg_iterations": self.iterations, "weak_nodes_last_step": self.weak_nodes,
@@ -283,6 +300,8 @@ class ConsistentMass(MassModel):
             if system.blended and frame is not None:
                 excess = np.where(system.excluded, 0.0, self.lumped - self._blend_target())
                 total = total + self.blend * excess[:, None] * frame[None, :]
+            if self._mix_excess is not None and frame is not None:  # the same for the mixed mass
+                total = total + np.where(system.excluded, 0.0, self._mix_excess)[:, None] * frame[None, :]
             return total
 
         if self._singular_near_edges(system):  # CG would not see it (see the method)
@@ -381,11 +400,5 @@ class ConsistentMass(MassModel):
         return initial_guess(self._previous, self._frame, kind, rhs, self.lumped, tiny, system, self.time_step)
 
     def _blend_target(self) -> np.ndarray:
-        """Positive diagonal to blend with: the lumped masses, or where row sums
-        are not all positive (q2, serendipity) the HRZ diagonal, ``M_ii`` scaled
-        to the total mass."""
-        if np.all(self.lumped[self.active] > 0):
-            return np.where(self.active, self.lumped, 1.0)
-        diagonal = self.matrix.diagonal()
-        scale = self.lumped[self.active].sum() / diagonal[self.active].sum()
-        return np.where(self.active, scale * diagonal, 1.0)
+        """Positive diagonal to blend with (:func:`.weak_rows.mix_target`)."""
+        return mix_target(self.lumped, self.matrix.diagonal(), self.active)
