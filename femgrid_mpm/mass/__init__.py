@@ -82,6 +82,7 @@ def build_mass_model(solver, grid, cells: CellMasses, per_body: bool = False,
         layer_width=round(grid.discretization.element_width / grid.spacing),  # in lattice steps
         time_step=time_step,
         weak_ratio=solver.weak_ratio,
+        weak_mix=solver.weak_mix,
         interior=interior_ratio(grid) if solver.weak_ratio > 0 and grid.nonnegative else 0.0,
         mix=solver.mix,
     )

@@ -91,9 +91,10 @@ class ConsistentMass(MassModel):
     time_step : float, optional
         The step (s): CG's first guess of the velocity is the last step's
         grid velocity advanced by its acceleration.
-    weak_ratio, interior : float
-        A node whose ``M_ii / m_i`` is below ``weak_ratio * interior`` (the basis'
-        value inside a body) is weak too (:mod:`.weak_rows`); 0: off.
+    weak_ratio, interior, weak_mix : float
+        A row whose ``M_ii / m_i`` is below ``weak_ratio * interior`` (the basis'
+        value inside a body) has the share ``weak_mix`` of its couplings moved onto
+        the diagonals (:mod:`.weak_rows`); weak_ratio 0: off.
     mix : float
         Lumped weight ``a`` of the mixed mass ``(1 - a) M + a D`` on the whole grid.
     """
@@ -114,11 +115,13 @@ class ConsistentMass(MassModel):
     time_step: float | None = None
     weak_ratio: float = 0.0
     interior: float = 0.0
+    weak_mix: float = 0.1
     mix: float = 0.0
     kind = "consistent"
     assembly = Assembly(node_volume=True, matrix=True)
     iterations: int = 0
     weak_nodes: int = 0
+    weak_rows: int = 0
     blended_steps: int = 0
 
     def __post_init__(self):
@@ -168,17 +171,20 @@ class ConsistentMass(MassModel):
     def _prepare(self, matrix: sp.csr_matrix, node_volume: np.ndarray | None, diagonal_index=None) -> None:
         diagonal = matrix.diagonal() if diagonal_index is None else matrix.data[diagonal_index]
         self.active = diagonal > 1e-24 * self.scale
-        self._weak, self.weak_nodes = np.zeros(self.n_nodes, dtype=bool), 0
+        self._weak, self.weak_nodes, self.weak_rows, shares = np.zeros(self.n_nodes, dtype=bool), 0, 0, None
         consistent = matrix  # the scipy path makes new matrices: N.T diag(m) N itself stays, for the estimate
         if self.nonnegative and node_volume is not None:
             fraction = np.divide(node_volume, self.node_integrals, out=np.ones(self.n_nodes), where=self.active)
             weak = self.active & (fraction < self.weak_fraction)
-            if self.weak_ratio > 0:
-                weak |= weak_by_ratio(diagonal, self.lumped, self.active, self.weak_ratio * self.interior)
             self.weak_nodes = int(weak.sum())
             self._weak = weak
+            if self.weak_ratio > 0:  # the rows seen through their function's tail: a share of their couplings
+                rows = weak_by_ratio(diagonal, self.lumped, self.active, self.weak_ratio * self.interior) & ~weak
+                self.weak_rows = int(rows.sum())
+                shares = self.weak_mix * rows if self.weak_rows else None
         target = np.where(self.active, mix_target(self.lumped, diagonal, self.active), 0.0) if self.mix > 0 else None
-        matrix = lumped_and_mixed(matrix, diagonal_index, self._weak if self.weak_nodes else None, self.mix, target)
+        matrix = lumped_and_mixed(matrix, diagonal_index, self._weak if self.weak_nodes else None, shares, self.mix,
+                                  target)
         # a (L - D): what the mixed mass's diagonal leaves of the row sums (the frame's share, see solve)
         excess = 0.0 if target is None else self.mix * np.where(self.active, self.lumped - target, 0.0)
         self._mix_excess = excess if np.any(excess) else None
@@ -229,8 +235,11 @@ class ConsistentMass(MassModel):
         return Inertia(matrix=self.matrix, consistent=self._consistent)
 
     def summary(self) -> dict:
-        return {"consistent_mass": {"cg_iterations": self.iterations, "weak_nodes_last_step": self.weak_nodes,
-                                    "blended_steps": self.blended_steps}}
+        entries = {"cg_iterations": self.iterations, "weak_nodes_last_step": self.weak_nodes,
+                   "blended_steps": self.blended_steps}
+        if self.weak_ratio > 0:
+            entries["weak_rows_last_step"] = self.weak_rows
+        return {"consistent_mass": entries}
 
     def grid_velocity(self, relative_momentum: np.ndarray, frame_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 17 in the frame moving with ``frame_velocity``: ``(p, v)``, the momentum

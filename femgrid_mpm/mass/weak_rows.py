@@ -67,6 +67,21 @@ def mix_target(lumped: np.ndarray, diagonal: np.ndarray, active: np.ndarray) -> 
 
 
 @compiled()
+def _move_couplings(indptr, indices, data, diagonal_index, share):
+    """Move the share ``max(share_i, share_j)`` of every coupling ``M_ij`` onto both diagonals
+    (share 1: :func:`.exclusion._lump_couplings_in_place`); the row sums stay, and the terms
+    added, ``s M_ij (e_i - e_j)(e_i - e_j)^T`` with ``M_ij >= 0``, are positive semi-definite."""
+    for i in range(len(indptr) - 1):
+        for entry in range(indptr[i], indptr[i + 1]):
+            j = indices[entry]
+            moved = max(share[i], share[j])
+            if j != i and moved > 0.0:
+                amount = moved * data[entry]
+                data[diagonal_index[i]] += amount
+                data[entry] -= amount
+
+
+@compiled()
 def _mix_in_place(data, diagonal_index, target, weight):
     """``(1 - weight) M + weight diag(target)`` in ``data`` itself (every stored entry scaled,
     the diagonal then moved toward its target)."""
@@ -77,9 +92,10 @@ def _mix_in_place(data, diagonal_index, target, weight):
         data[diagonal_index[i]] += weight * target[i]
 
 
-def lumped_and_mixed(matrix: sp.csr_matrix, diagonal_index, weak: np.ndarray | None, mix: float,
-                     target: np.ndarray | None) -> sp.csr_matrix:
-    """The weak nodes' couplings moved onto the diagonals, then ``(1 - mix) M + mix
+def lumped_and_mixed(matrix: sp.csr_matrix, diagonal_index, weak: np.ndarray | None, rows: np.ndarray | None,
+                     mix: float, target: np.ndarray | None) -> sp.csr_matrix:
+    """The weak nodes' couplings moved onto the diagonals, then the share ``rows[i]`` of each
+    coupling of the weak rows (:func:`_move_couplings`), then ``(1 - mix) M + mix
     diag(target)``: in place on the fixed pattern (``diagonal_index`` given), else a new
     matrix (the assembled one is left as it is)."""
     if weak is not None:
@@ -87,6 +103,16 @@ def lumped_and_mixed(matrix: sp.csr_matrix, diagonal_index, weak: np.ndarray | N
             matrix = _lump_couplings(matrix, weak)
         else:
             _lump_couplings_in_place(matrix.indptr, matrix.indices, matrix.data, diagonal_index, weak)
+    if rows is not None:
+        if diagonal_index is None:  # a copy, with the position of each stored diagonal entry
+            matrix = sp.csr_matrix(matrix, copy=True)
+            row_of = np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))
+            on_diagonal = np.flatnonzero(matrix.indices == row_of)
+            positions = np.zeros(matrix.shape[0], dtype=np.int64)  # a row without one has no entries
+            positions[row_of[on_diagonal]] = on_diagonal
+            _move_couplings(matrix.indptr, matrix.indices, matrix.data, positions, rows)
+        else:
+            _move_couplings(matrix.indptr, matrix.indices, matrix.data, diagonal_index, rows)
     if mix > 0:
         if diagonal_index is None:
             matrix = ((1.0 - mix) * matrix + mix * sp.diags(target)).tocsr()
