@@ -14,7 +14,8 @@ points* are right), but internal forces in general do not, and velocity
    are lumped: each coupling ``M_ij`` to a weak node is moved onto both
    diagonals.  This keeps every row sum (so rigid motion and momentum stay
    exact) and only adds positive semi-definite terms, so it never makes the
-   matrix less definite.
+   matrix less definite.  Rows seen through their function's tail, which set
+   the critical step, give a share of their couplings (:mod:`.weak_rows`).
 3. What remains singular is *detected*: a SuperLU pivot falls below
    ``1e-8`` of its own diagonal entry (the node's function is reproduced by
    the others), or preconditioned CG fails to converge on the force system.  The ``fallback`` policy decides:
@@ -91,12 +92,10 @@ class ConsistentMass(MassModel):
     time_step : float, optional
         The step (s): CG's first guess of the velocity is the last step's
         grid velocity advanced by its acceleration.
-    weak_ratio, interior, weak_mix : float
-        A row whose ``M_ii / m_i`` is below ``weak_ratio * interior`` (the basis'
-        value inside a body) has the share ``weak_mix`` of its couplings moved onto
-        the diagonals (:mod:`.weak_rows`); weak_ratio 0: off.
-    mix : float
-        Lumped weight ``a`` of the mixed mass ``(1 - a) M + a D`` on the whole grid.
+    weak_ratio, interior, weak_mix, mix : float
+        The weak rows (``M_ii / m_i`` below ``weak_ratio * interior``, the basis' value
+        inside a body) give the share ``weak_mix`` of their couplings to the diagonals;
+        ``mix``: the mixed mass ``(1 - mix) M + mix D`` (:mod:`.weak_rows`).
     """
 
     n_nodes: int
@@ -115,7 +114,7 @@ class ConsistentMass(MassModel):
     time_step: float | None = None
     weak_ratio: float = 0.0
     interior: float = 0.0
-    weak_mix: float = 0.1
+    weak_mix: float = 0.02
     mix: float = 0.0
     kind = "consistent"
     assembly = Assembly(node_volume=True, matrix=True)
@@ -183,11 +182,10 @@ class ConsistentMass(MassModel):
                 self.weak_rows = int(rows.sum())
                 shares = self.weak_mix * rows if self.weak_rows else None
         target = np.where(self.active, mix_target(self.lumped, diagonal, self.active), 0.0) if self.mix > 0 else None
-        matrix = lumped_and_mixed(matrix, diagonal_index, self._weak if self.weak_nodes else None, shares, self.mix,
-                                  target)
+        matrix = lumped_and_mixed(matrix, diagonal_index, self._weak if self.weak_nodes else None, shares, self.mix, target)
         # a (L - D): what the mixed mass's diagonal leaves of the row sums (the frame's share, see solve)
-        excess = 0.0 if target is None else self.mix * np.where(self.active, self.lumped - target, 0.0)
-        self._mix_excess = excess if np.any(excess) else None
+        self._mix_excess = None if target is None or np.array_equal(target, self.lumped * self.active) else \
+            self.mix * np.where(self.active, self.lumped - target, 0.0)
         self._consistent = consistent if matrix is not consistent else None
         self._assembled, self._correction, self._full = matrix, None, None
         # empty and fixed degrees of freedom leave the system (identity rows);
@@ -228,18 +226,12 @@ class ConsistentMass(MassModel):
         return self._full
 
     def inertia(self, N: sp.csr_matrix) -> Inertia:
-        """``M``, weak nodes lumped and mixed; with ``N.T diag(m) N`` itself when they
-        differ (the grid velocity is projected afresh from the points every step, so the
-        iteration's inverse mass is ``M^-1 M_C M^-1``, see
-        :func:`femgrid_mpm.stability.critical_time_step`).  After :meth:`assemble`."""
+        """``M`` (weak nodes and rows treated, mixed), and ``N.T diag(m) N`` where it differs."""
         return Inertia(matrix=self.matrix, consistent=self._consistent)
 
     def summary(self) -> dict:
-        entries = {"cg_iterations": self.iterations, "weak_nodes_last_step": self.weak_nodes,
-                   "blended_steps": self.blended_steps}
-        if self.weak_ratio > 0:
-            entries["weak_rows_last_step"] = self.weak_rows
-        return {"consistent_mass": entries}
+        return {"consistent_mass": {"cg_iterations": self.iterations, "weak_nodes_last_step": self.weak_nodes,
+                                    "weak_rows_last_step": self.weak_rows, "blended_steps": self.blended_steps}}
 
     def grid_velocity(self, relative_momentum: np.ndarray, frame_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 17 in the frame moving with ``frame_velocity``: ``(p, v)``, the momentum
