@@ -26,7 +26,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..kernels.compiled import compiled
-from .exclusion import _lump_couplings, _lump_couplings_in_place
+from .exclusion import _lump_couplings, _lump_couplings_in_place, _rows_touching
 
 #: samples per lattice cell and axis for the interior value (midpoints: 2e-3 relative for cubic splines)
 SAMPLES = 8
@@ -70,8 +70,12 @@ def mix_target(lumped: np.ndarray, diagonal: np.ndarray, active: np.ndarray) -> 
 def _move_couplings(indptr, indices, data, diagonal_index, share):
     """Move the share ``max(share_i, share_j)`` of every coupling ``M_ij`` onto both diagonals
     (share 1: :func:`.exclusion._lump_couplings_in_place`); the row sums stay, and the terms
-    added, ``s M_ij (e_i - e_j)(e_i - e_j)^T`` with ``M_ij >= 0``, are positive semi-definite."""
+    added, ``s M_ij (e_i - e_j)(e_i - e_j)^T`` with ``M_ij >= 0``, are positive semi-definite.
+    Only the weak rows and their neighbours have such couplings: the others are not read."""
+    touched = _rows_touching(indptr, indices, share > 0.0)
     for i in range(len(indptr) - 1):
+        if not touched[i]:
+            continue
         for entry in range(indptr[i], indptr[i + 1]):
             j = indices[entry]
             moved = max(share[i], share[j])
