@@ -110,7 +110,8 @@ def critical_time_step(simulation) -> float:
     semi-definite even where lumped masses are negative, which is why the
     serendipity element with row-sum lumping, whose corner masses are
     negative, runs at all (the paper's "self-restoration").  Consistent mass:
-    ``M_C^-1 M_C M_C^-1 = M_C^-1``, the textbook case.
+    ``M_C^-1 M_C M_C^-1 = M_C^-1``, the textbook case; with its weak rows treated or
+    mixed (:mod:`femgrid_mpm.mass.weak_rows`) it is ``M^-1 M_C M^-1``.
 
     The same holds for any diagonal mass with its own transfer weights W
     (HRZ, :class:`femgrid_mpm.mass.HrzMass`): ``M^-1 W^T diag(m) W M^-1``,
