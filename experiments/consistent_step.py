@@ -16,7 +16,6 @@ share of the error from the mass's.  Prints a Markdown table (docs/time_step.md)
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import warnings
 
