@@ -111,7 +111,8 @@ def critical_time_step(simulation) -> float:
     semi-definite even where lumped masses are negative, which is why the
     serendipity element with row-sum lumping, whose corner masses are
     negative, runs at all (the paper's "self-restoration").  Consistent mass:
-    ``M_C^-1 M_C M_C^-1 = M_C^-1``, the textbook case.
+    ``M_C^-1 M_C M_C^-1 = M_C^-1``, the textbook case; with its weak rows treated or
+    mixed (:mod:`femgrid_mpm.mass.weak_rows`) it is ``M^-1 M_C M^-1``.
 
     The same holds for any diagonal mass with its own transfer weights W
     (HRZ, :class:`femgrid_mpm.mass.HrzMass`): ``M^-1 W^T diag(m) W M^-1``,
@@ -162,4 +163,26 @@ def _largest_frequency_squared(inertia, point_mass: np.ndarray, free: np.ndarray
         effective = sp.kron(effective, sp.identity(2), format="csr")[free][:, free]
         return largest_eigenvalue_of_product(effective, stiffness)
     mass = sp.kron(inertia.matrix, sp.identity(2), format="csr")[free][:, free]
-    return largest_frequency_squared(stiffness, mass)
+    if inertia.consistent is None:
+        return largest_frequency_squared(stiffness, mass)
+    # a mass M other than N.T diag(m) N (weak rows lumped, a mixed mass): the grid velocity is
+    # projected afresh from the points, v <- M^-1 N.T m (v_p + dt N a), so the increment
+    # a = M^-1 f reaches the grid as M^-1 M_C M^-1 f
+    consistent = sp.kron(inertia.consistent, sp.identity(2), format="csr")[free][:, free]
+    return largest_eigenvalue_of_product(_InverseSandwich(mass, consistent), stiffness)
+
+
+class _InverseSandwich:
+    """``M^-1 C M^-1`` (M symmetric positive definite), applied through M's factors, and
+    made dense for the small problems of :func:`largest_eigenvalue_of_product`."""
+
+    def __init__(self, mass: sp.csr_matrix, consistent: sp.csr_matrix):
+        self.shape, self._consistent = mass.shape, consistent
+        self._factors = spla.splu(mass.tocsc())
+
+    def __matmul__(self, vector: np.ndarray) -> np.ndarray:
+        return self._factors.solve(self._consistent @ self._factors.solve(vector))
+
+    def toarray(self) -> np.ndarray:
+        inverse = self._factors.solve(np.eye(self.shape[0]))
+        return inverse @ self._consistent.toarray() @ inverse

@@ -127,7 +127,7 @@ def test_system_made_in_place_keeps_the_mass_matrix(basis, density):
     import scipy.sparse as sp
 
     scene = block_scene(basis, "consistent", supports=[{"where": "x <= 1", "fix": ["x", "y"]}])
-    scene = scene.with_overrides(**{"solver.weak_fraction": 0.0,  # no weak-node lumping: M is the product
+    scene = scene.with_overrides(**{"solver.weak_fraction": 0.0, "solver.weak_ratio": 0.0,  # M is the product
                                     "bodies.0.material.density": density})
     simulation = Simulation(scene)
     simulation.particles.v[:] = np.random.default_rng(5).normal(size=simulation.particles.v.shape)

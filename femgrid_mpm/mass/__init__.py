@@ -21,6 +21,7 @@ declares in ``assembly`` (:class:`~.protocol.Assembly`).
 ``exclusion.py``       weak-node lumping and exclusion, in place on the fixed pattern
 ``scale.py``           :class:`CellMasses`: a full cell of the material at each node, the scale of "empty"
 ``constraint.py``      mirrored ghost nodes: ``v = T w`` and the mass ``T.T M T`` (:class:`ConstrainedMass`)
+``weak_rows.py``       the rows that set the consistent mass's critical step; the mixed mass
 =====================  ==========================================================
 """
 
@@ -35,6 +36,7 @@ from .per_body import FieldLumpedMass
 from .preconditioners import tensor_preconditioner
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
 from .scale import CellMasses
+from .weak_rows import interior_ratio
 
 __all__ = [
     "Assembly", "CellMasses", "ConsistentMass", "ConstrainedMass", "NodeConstraint", "DIRECT_LIMIT", "FieldLumpedMass", "HrzMass", "Inertia", "LumpedMass", "MassModel",
@@ -99,4 +101,8 @@ def _unconstrained(solver, grid, cells: CellMasses, time_step: float | None, fix
         layer_width=round(grid.discretization.element_width / grid.spacing),  # in lattice steps
         time_step=time_step,
         solves=solves,
+        weak_ratio=solver.weak_ratio,
+        weak_mix=solver.weak_mix,
+        interior=interior_ratio(grid) if solver.weak_ratio > 0 and grid.nonnegative else 0.0,
+        mix=solver.mix,
     )

@@ -14,7 +14,8 @@ points* are right), but internal forces in general do not, and velocity
    are lumped: each coupling ``M_ij`` to a weak node is moved onto both
    diagonals.  This keeps every row sum (so rigid motion and momentum stay
    exact) and only adds positive semi-definite terms, so it never makes the
-   matrix less definite.
+   matrix less definite.  Rows seen through their function's tail, which set
+   the critical step, give a share of their couplings (:mod:`.weak_rows`).
 3. What remains singular is *detected*: a SuperLU pivot falls below
    ``1e-8`` of its own diagonal entry (the node's function is reproduced by
    the others), or preconditioned CG fails to converge on the force system.  The ``fallback`` policy decides:
@@ -44,7 +45,7 @@ import scipy.sparse as sp
 
 from .cg import _preconditioned_cg, initial_guess
 from .direct import _direct_solve, _factor, _smallest_pivot_node
-from .exclusion import _exclude_in_place, _lump_couplings, _lump_couplings_in_place, _unexcluded_product
+from .exclusion import _exclude_in_place, _unexcluded_product
 from .preconditioners import TensorPreconditioner
 from .reused import ReusedFactors, kept_arrays, restore_kept
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
@@ -52,6 +53,7 @@ from .scale import CellMasses
 from .singular import singular_near_edges
 from .sparse import _CompiledCSR
 from .system import _System
+from .weak_rows import lumped_and_mixed, mix_target, weak_by_ratio
 
 #: largest number of active nodes for which "auto" factors the matrix
 DIRECT_LIMIT = 5000
@@ -97,6 +99,10 @@ class ConsistentMass(MassModel):
     solves : bool
         Make the solve's systems (False: only ``M`` is assembled, for a model
         that solves a reduced form of it, :class:`.constraint.ConstrainedMass`).
+    weak_ratio, interior, weak_mix, mix : float
+        The weak rows (``M_ii / m_i`` below ``weak_ratio * interior``, the basis' value
+        inside a body) give the share ``weak_mix`` of their couplings to the diagonals;
+        ``mix``: the mixed mass ``(1 - mix) M + mix D`` (:mod:`.weak_rows`).
     """
 
     n_nodes: int
@@ -114,10 +120,15 @@ class ConsistentMass(MassModel):
     layer_width: int = 2
     time_step: float | None = None
     solves: bool = True
+    weak_ratio: float = 0.0
+    interior: float = 0.0
+    weak_mix: float = 0.02
+    mix: float = 0.0
     kind = "consistent"
     assembly = Assembly(node_volume=True, matrix=True)
     iterations: int = 0
     weak_nodes: int = 0
+    weak_rows: int = 0
     blended_steps: int = 0
 
     def __post_init__(self):
@@ -126,6 +137,7 @@ class ConsistentMass(MassModel):
         # the assembled M (or, made into the solve's system in place, that system R and the
         # entries it overwrote), and M rebuilt from them on demand (:attr:`matrix`)
         self._assembled, self._correction, self._full = None, None, None
+        self._consistent, self._mix_excess = None, None  # set by _prepare
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
         # "auto" below DIRECT_LIMIT: the factors kept from an earlier step, per system's columns
         self._kept: dict[tuple, ReusedFactors] = {}
@@ -171,17 +183,23 @@ class ConsistentMass(MassModel):
     def _prepare(self, matrix: sp.csr_matrix, node_volume: np.ndarray | None, diagonal_index=None) -> None:
         diagonal = matrix.diagonal() if diagonal_index is None else matrix.data[diagonal_index]
         self.active = diagonal > 1e-24 * self.scale
-        self._weak = np.zeros(self.n_nodes, dtype=bool)
+        self._weak, self.weak_nodes, self.weak_rows, shares = np.zeros(self.n_nodes, dtype=bool), 0, 0, None
+        consistent = matrix  # the scipy path makes new matrices: N.T diag(m) N itself stays, for the estimate
         if self.nonnegative and node_volume is not None:
             fraction = np.divide(node_volume, self.node_integrals, out=np.ones(self.n_nodes), where=self.active)
             weak = self.active & (fraction < self.weak_fraction)
             self.weak_nodes = int(weak.sum())
             self._weak = weak
-            if self.weak_nodes:
-                if diagonal_index is None:
-                    matrix = _lump_couplings(matrix, weak)
-                else:  # in place, keeping the structure
-                    _lump_couplings_in_place(matrix.indptr, matrix.indices, matrix.data, diagonal_index, weak)
+            if self.weak_ratio > 0:  # the rows seen through their function's tail: a share of their couplings
+                rows = weak_by_ratio(diagonal, self.lumped, self.active, self.weak_ratio * self.interior) & ~weak
+                self.weak_rows = int(rows.sum())
+                shares = self.weak_mix * rows if self.weak_rows else None
+        target = np.where(self.active, mix_target(self.lumped, diagonal, self.active), 0.0) if self.mix > 0 else None
+        matrix = lumped_and_mixed(matrix, diagonal_index, self._weak if self.weak_nodes else None, shares, self.mix, target)
+        # a (L - D): what the mixed mass's diagonal leaves of the row sums (the frame's share, see solve)
+        self._mix_excess = None if target is None or np.array_equal(target, self.lumped * self.active) else \
+            self.mix * np.where(self.active, self.lumped - target, 0.0)
+        self._consistent = consistent if matrix is not consistent else None
         self._assembled, self._correction, self._full = matrix, None, None
         if not self.solves:
             return
@@ -253,12 +271,12 @@ class ConsistentMass(MassModel):
         return self._full
 
     def inertia(self, N: sp.csr_matrix) -> Inertia:
-        """``M``, weak nodes lumped."""
-        return Inertia(matrix=self.matrix)
+        """``M`` (weak nodes and rows treated, mixed), and ``N.T diag(m) N`` where it differs."""
+        return Inertia(matrix=self.matrix, consistent=self._consistent)
 
     def summary(self) -> dict:
         return {"consistent_mass": {"cg_iterations": self.iterations, "weak_nodes_last_step": self.weak_nodes,
-                                    "blended_steps": self.blended_steps}}
+                                    "weak_rows_last_step": self.weak_rows, "blended_steps": self.blended_steps}}
 
     def grid_velocity(self, relative_momentum: np.ndarray, frame_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 17 in the frame moving with ``frame_velocity``: ``(p, v)``, the momentum
@@ -328,6 +346,8 @@ class ConsistentMass(MassModel):
             if system.blended and frame is not None:
                 excess = np.where(system.excluded, 0.0, self.lumped - self._blend_target())
                 total = total + self.blend * excess[:, None] * frame[None, :]
+            if self._mix_excess is not None and frame is not None:  # the same for the mixed mass
+                total = total + np.where(system.excluded, 0.0, self._mix_excess)[:, None] * frame[None, :]
             return total
 
         if self._singular_near_edges(system):  # CG would not see it (see the method)
@@ -405,11 +425,5 @@ class ConsistentMass(MassModel):
         return initial_guess(self._previous, self._frame, kind, rhs, self.lumped, tiny, system, self.time_step)
 
     def _blend_target(self) -> np.ndarray:
-        """Positive diagonal to blend with: the lumped masses, or where row sums
-        are not all positive (q2, serendipity) the HRZ diagonal, ``M_ii`` scaled
-        to the total mass."""
-        if np.all(self.lumped[self.active] > 0):
-            return np.where(self.active, self.lumped, 1.0)
-        diagonal = self.matrix.diagonal()
-        scale = self.lumped[self.active].sum() / diagonal[self.active].sum()
-        return np.where(self.active, scale * diagonal, 1.0)
+        """Positive diagonal to blend with (:func:`.weak_rows.mix_target`)."""
+        return mix_target(self.lumped, self.matrix.diagonal(), self.active)

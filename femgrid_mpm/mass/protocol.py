@@ -83,11 +83,14 @@ class Inertia:
     """The mass the explicit iteration has, for the critical time step
     (:func:`femgrid_mpm.stability.critical_time_step`): a diagonal mass, given by
     its velocity and acceleration inverses and the weights that carry momentum
-    between points and grid; or a coupled ``matrix``."""
+    between points and grid; or a coupled ``matrix``, with ``consistent``, the
+    points' ``N.T diag(m) N``, where the matrix differs from it (weak rows lumped,
+    a mixed mass): the iteration's inverse mass is then ``M^-1 M_C M^-1``."""
 
     inverses: tuple[np.ndarray, np.ndarray] | None = None
     transfer: sp.csr_matrix | None = None
     matrix: sp.csr_matrix | None = None
+    consistent: sp.csr_matrix | None = None
 
 
 class MassModel(abc.ABC):

@@ -126,6 +126,12 @@ class SolverSpec(_Model):
     consistent_fallback: Literal["error", "blend"] = "error"
     blend: Annotated[float, Field(gt=0, le=1)] = 0.1
     weak_fraction: Annotated[float, Field(ge=0, lt=1)] = 0.01
+    #: consistent mass, non-negative bases: a row whose M_ii / m_i is below this fraction of an interior node's is weak
+    weak_ratio: Annotated[float, Field(ge=0, lt=1)] = 0.5
+    #: the share of a weak row's couplings moved onto the diagonals (1: the row lumped)
+    weak_mix: Annotated[float, Field(gt=0, le=1)] = 0.02
+    #: consistent mass: lumped weight a of the mixed mass (1 - a) M_C + a M_L on the whole grid
+    mix: Annotated[float, Field(ge=0, le=1)] = 0.0
     linear_solver: Literal["auto", "direct", "cg"] = "auto"
     cg_tolerance: Annotated[float, Field(gt=0, lt=1)] = 1e-6
     #: the step's transfers: compiled kernels, or scipy.sparse (the reference)
