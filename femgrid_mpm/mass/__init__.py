@@ -68,7 +68,8 @@ def build_mass_model(solver, grid, cells: CellMasses, per_body: bool = False,
     if constraint is not None:
         if per_body:
             raise ValueError("supports with ghosts = 'mirrored' need one shared velocity field (not frictional contact)")
-        inner = _unconstrained(solver, grid, cells, time_step, solves=False)
+        # mirrored ghost nodes are tied to interior ones: their rows are not weak once folded
+        inner = _unconstrained(solver.model_copy(update={"weak_ratio": 0.0}), grid, cells, time_step, solves=False)
         return ConstrainedMass(inner, constraint, diagonal=not isinstance(inner, ConsistentMass))
     if per_body:
         return FieldLumpedMass(grid.n_nodes, cells)

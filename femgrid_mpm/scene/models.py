@@ -127,7 +127,7 @@ class SolverSpec(_Model):
     blend: Annotated[float, Field(gt=0, le=1)] = 0.1
     weak_fraction: Annotated[float, Field(ge=0, lt=1)] = 0.01
     #: consistent mass, non-negative bases: a row whose M_ii / m_i is below this fraction of an interior node's is weak
-    weak_ratio: Annotated[float, Field(ge=0, lt=1)] = 0.5
+    weak_ratio: Annotated[float, Field(ge=0, lt=1)] = 0.0
     #: the share of a weak row's couplings moved onto the diagonals (1: the row lumped)
     weak_mix: Annotated[float, Field(gt=0, le=1)] = 0.02
     #: consistent mass: lumped weight a of the mixed mass (1 - a) M_C + a M_L on the whole grid
