@@ -1,7 +1,9 @@
 """What consistent mass costs against lumped mass: per step, and to the same end time.
 
 Run: ``python benchmarks/consistent_cost.py`` (about 15 minutes on 2 shared cores;
-``--quick``: 1e3 and 1e4 points; ``--sizes 1000`` and ``--bases q1,bspline3`` choose).
+``--quick``: 1e3 and 1e4 points; ``--sizes 1000`` and ``--bases q1,bspline3`` choose;
+``--set solver.weak_ratio=0.5`` sets a key of the consistent runs' scenes, e.g. the weak rows'
+treatment of docs/time_step.md).
 
 For each size and basis, on :func:`step.block_scene`'s block (2 x 2 points per
 cell, the vibrating bar's cosine velocity, its own step ``0.1 h / c``):
@@ -46,7 +48,7 @@ TRIAL_STEPS = 20
 WAVE_SPEED = float(np.sqrt(1e4 * 0.7 / (1.3 * 0.4) / 1e3))  # the block's p-wave speed (step.block_scene)
 
 
-def per_step(bases, n: int, budget: float) -> dict:
+def per_step(bases, n: int, budget: float, settings: dict | None = None) -> dict:
     """(basis, mass) -> seconds per step at about ``n`` points, mass "direct" the consistent
     mass factored every step (``linear_solver = "direct"``, what "auto" did before it kept
     the factors); NaN for a case that stops within
@@ -57,6 +59,8 @@ def per_step(bases, n: int, budget: float) -> dict:
         for mass in ("lumped", "consistent", "direct"):
             scene = (block_scene(basis, "consistent", n).with_overrides(**{"solver.linear_solver": "direct"})
                      if mass == "direct" else block_scene(basis, mass, n))
+            if mass != "lumped" and settings:
+                scene = scene.with_overrides(**settings)
             simulation = Simulation(scene)
             try:
                 for _ in range(TRIAL_STEPS):
@@ -67,9 +71,10 @@ def per_step(bases, n: int, budget: float) -> dict:
     return {**fastest(cases, budget), **stopped}
 
 
-def to_end_time(basis: str, mass: str, n: int) -> tuple[int, float, str]:
+def to_end_time(basis: str, mass: str, n: int, settings: dict | None = None) -> tuple[int, float, str]:
     """(steps, wall seconds, status) of the block with ``dt = "auto"`` to :data:`TRANSITS` h / c."""
-    scene = block_scene(basis, mass, n).with_overrides(**{"time.dt": "auto", "time.end": TRANSITS / WAVE_SPEED})
+    scene = block_scene(basis, mass, n).with_overrides(**{"time.dt": "auto", "time.end": TRANSITS / WAVE_SPEED,
+                                                          **(settings if mass != "lumped" else {})})
     simulation = Simulation(scene)
     start = time.perf_counter()
     try:
@@ -85,20 +90,30 @@ def main(argv=None) -> None:
     parser.add_argument("--sizes", help="comma-separated numbers of points (default 1000,10000,100000)")
     parser.add_argument("--bases", default=",".join(BASES), help=f"comma-separated (default {','.join(BASES)})")
     parser.add_argument("--budget", type=float, default=1.0, help="seconds of timed steps per case (default 1)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a scene key of the consistent runs, e.g. solver.weak_ratio=0.5 (repeatable)")
     args = parser.parse_args(argv)
+    settings = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        try:
+            settings[key] = float(value)
+        except ValueError:
+            settings[key] = value
     sizes = [int(float(s)) for s in args.sizes.split(",")] if args.sizes else list(SIZES[:2] if args.quick else SIZES)
     bases = args.bases.split(",")
     warnings.simplefilter("ignore")
-    print(f"{time.strftime('%Y-%m-%d')}; numpy {np.__version__}; one BLAS thread; end time {TRANSITS} h / c\n")
+    chosen = "".join(f"; consistent with {key} = {value}" for key, value in settings.items())
+    print(f"{time.strftime('%Y-%m-%d')}; numpy {np.__version__}; one BLAS thread; end time {TRANSITS} h / c{chosen}\n")
     for n in sizes:
-        seconds = per_step(bases, n, args.budget)
+        seconds = per_step(bases, n, args.budget, settings)
         print(f"about {n:.0e} points:\n")
         print("| basis | consistent per step | lumped per step | ratio | factored every step: ratio | steps to the end time (consistent / "
               "lumped) | wall to the end time (consistent / lumped) |")
         print("|---|---|---|---|---|---|---|")
         for basis in bases:
             consistent, lumped = seconds[basis, "consistent"], seconds[basis, "lumped"]
-            (steps_c, wall_c, status_c), (steps_l, wall_l, status_l) = (to_end_time(basis, mass, n)
+            (steps_c, wall_c, status_c), (steps_l, wall_l, status_l) = (to_end_time(basis, mass, n, settings)
                                                                          for mass in ("consistent", "lumped"))
             note = "" if status_c == status_l == "completed" else f" ({status_c}; {status_l})"
             if np.isnan(consistent):

@@ -45,9 +45,9 @@ import scipy.sparse as sp
 
 from .cg import _preconditioned_cg, initial_guess
 from .direct import _direct_solve, _factor, _smallest_pivot_node
-from .exclusion import _exclude_in_place, _unexcluded_product
+from .exclusion import _exclude_in_place, unexcluded_apply, unexcluded_matrix
 from .preconditioners import TensorPreconditioner
-from .reused import ReusedFactors, kept_arrays, restore_kept
+from .reused import KeptFactors
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
 from .scale import CellMasses
 from .singular import singular_near_edges
@@ -140,14 +140,14 @@ class ConsistentMass(MassModel):
         self._consistent, self._mix_excess = None, None  # set by _prepare
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
         # "auto" below DIRECT_LIMIT: the factors kept from an earlier step, per system's columns
-        self._kept: dict[tuple, ReusedFactors] = {}
+        self._kept = KeptFactors()
 
     def state(self) -> tuple[dict, dict]:
         """What carries from step to step, ``(arrays, values)``: CG's warm-start
         history (the last two solutions of each kind) and the counters."""
         arrays = {f"previous.{kind}.{index}": solution
                   for kind, history in self._previous.items() for index, solution in enumerate(history)}
-        arrays.update(kept_arrays(self._kept))
+        arrays.update(self._kept.arrays())
         values = {"iterations": self.iterations, "weak_nodes": self.weak_nodes, "blended_steps": self.blended_steps,
                   "previous": {kind: len(history) for kind, history in self._previous.items()},
                   "kept": len(self._kept)}
@@ -159,7 +159,7 @@ class ConsistentMass(MassModel):
         self.blended_steps = int(values["blended_steps"])
         self._previous = {kind: tuple(np.array(arrays[f"previous.{kind}.{index}"]) for index in range(count))
                           for kind, count in values["previous"].items()}
-        self._kept = restore_kept(arrays, values.get("kept", 0))
+        self._kept = KeptFactors.restored(arrays, values.get("kept", 0))
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
         weighted = N.multiply(m_p[:, None]).tocsr()
@@ -212,9 +212,7 @@ class ConsistentMass(MassModel):
             self.linear_solver == "auto" and np.count_nonzero(self.active) <= DIRECT_LIMIT
         )
         # below DIRECT_LIMIT, "auto" keeps a system's factors while they fit it (see .reused)
-        kept = {columns: self._kept.get(columns) for columns in groups} if self._keeps_factors else {}
-        kept = {columns: factors for columns, factors in kept.items()
-                if factors is not None and factors.fits(excluded[:, columns[0]], self._weak, columns)}
+        kept = self._kept.fitting(groups, excluded, self._weak) if self._keeps_factors else KeptFactors()
         if diagonal_index is not None and len(groups) == 1:
             # the one system is made from the assembled matrix in place (a copy of its data was
             # ~25 ns per point-step for cubic splines at 1e5 points); M is R with the entries the
@@ -232,7 +230,7 @@ class ConsistentMass(MassModel):
             for system in self._systems:
                 system.kept = kept.get(tuple(system.columns))
                 if system.kept is None:
-                    self._keep(system)
+                    kept.keep(system, self._weak)
 
     @property
     def _keeps_factors(self) -> bool:
@@ -245,14 +243,6 @@ class ConsistentMass(MassModel):
         """Whether the solutions are kept for the next step's first guess (CG's)."""
         return not self._direct or self.linear_solver == "auto"
 
-    def _keep(self, system: "_System") -> None:
-        """Keep a freshly factored system's factors for the next steps (none if it is singular)."""
-        columns = tuple(system.columns)
-        if system.factors is None or system.blended:
-            self._kept.pop(columns, None)
-        else:
-            self._kept[columns] = ReusedFactors.of(system.factors, system.excluded, self._weak, columns)
-
     @property
     def matrix(self) -> sp.csr_matrix:
         """``M`` (n_nodes, n_nodes), after the weak-node lumping.  Where the solve's system
@@ -260,14 +250,7 @@ class ConsistentMass(MassModel):
         if self._correction is None:
             return self._assembled
         if self._full is None:
-            positions, _, old = self._correction
-            data = self._assembled.data.copy()
-            data[positions] = old  # the entries themselves, not a difference: exact at any scale
-            # its own index arrays: scipy sorts indices in place (e.g. in abs()), which must not
-            # scramble the system's
-            self._full = _CompiledCSR((data, self._assembled.indices.copy(), self._assembled.indptr.copy()),
-                                      shape=self._assembled.shape, copy=False)
-            self._full.upper_start = self._assembled.upper_start
+            self._full = unexcluded_matrix(self._assembled, self._correction)
         return self._full
 
     def inertia(self, N: sp.csr_matrix) -> Inertia:
@@ -292,12 +275,7 @@ class ConsistentMass(MassModel):
         """``M @ vector`` with the consistent matrix (empty rows zero)."""
         if self._correction is None:
             return self._assembled @ vector
-        positions, rows, old = self._correction  # from R @ vector and what the exclusion overwrote
-        columns_of = np.ascontiguousarray(np.reshape(vector, (vector.shape[0], -1)), dtype=float)
-        product = _unexcluded_product(np.reshape(self._assembled @ columns_of, columns_of.shape),
-                                      self._systems[0].excluded, self._assembled.indices, positions, rows, old,
-                                      columns_of)
-        return product.reshape(vector.shape)
+        return unexcluded_apply(self._assembled, self._correction, self._systems[0].excluded, vector)
 
     def solve(self, rhs: np.ndarray, kind: str = "velocity", frame: np.ndarray | None = None) -> np.ndarray:
         """Solve ``M x = rhs`` for the two columns of rhs (n_nodes, 2) on the free
@@ -400,7 +378,7 @@ class ConsistentMass(MassModel):
                 if converged:
                     return solution, True
                 system.kept, system.factors = None, _factor(system.matrix)  # this step's own, and kept
-                self._keep(system)
+                self._kept.keep(system, self._weak)
             return _direct_solve(system.factors, system.matrix, rhs)
         guess = self._initial_guess(rhs, kind, system)
         tensor = None if self.preconditioner is None else self.preconditioner.scaled(system)

@@ -7,6 +7,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..kernels.compiled import compiled
+from .sparse import _CompiledCSR
 
 
 def _lump_couplings(matrix: sp.csr_matrix, weak: np.ndarray) -> sp.csr_matrix:
@@ -103,3 +104,25 @@ def _unexcluded_product(product, excluded, indices, positions, rows, old, vector
         for c in range(vector.shape[1]):
             product[rows[t], c] += old[t] * vector[j, c]
     return product
+
+
+def unexcluded_matrix(system_matrix: _CompiledCSR, correction: tuple) -> _CompiledCSR:
+    """``M`` rebuilt from the system ``R`` made from it in place and the entries the exclusion
+    overwrote (:func:`_exclude_in_place`): the same structure, its own index arrays (scipy
+    sorts indices in place, e.g. in abs(), which must not scramble the system's)."""
+    positions, _, old = correction
+    data = system_matrix.data.copy()
+    data[positions] = old  # the entries themselves, not a difference: exact at any scale
+    full = _CompiledCSR((data, system_matrix.indices.copy(), system_matrix.indptr.copy()),
+                        shape=system_matrix.shape, copy=False)
+    full.upper_start = system_matrix.upper_start
+    return full
+
+
+def unexcluded_apply(system_matrix, correction: tuple, excluded: np.ndarray, vector: np.ndarray) -> np.ndarray:
+    """``M @ vector`` from ``R @ vector`` and the overwritten entries (:func:`_unexcluded_product`)."""
+    positions, rows, old = correction
+    columns_of = np.ascontiguousarray(np.reshape(vector, (vector.shape[0], -1)), dtype=float)
+    product = _unexcluded_product(np.reshape(system_matrix @ columns_of, columns_of.shape), excluded,
+                                  system_matrix.indices, positions, rows, old, columns_of)
+    return product.reshape(vector.shape)

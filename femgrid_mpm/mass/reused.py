@@ -111,21 +111,37 @@ class ReusedFactors:
         return out
 
 
-def kept_arrays(kept: dict) -> dict:
-    """The kept factors of each system as a checkpoint's arrays (:func:`restore_kept`)."""
-    return {f"kept.{index}.{name}": array for index, factors in enumerate(kept.values())
-            for name, array in factors.arrays().items()}
+class KeptFactors(dict):
+    """The factors kept over the steps, ``{columns: ReusedFactors}``, one per system."""
 
+    def fitting(self, groups, excluded: np.ndarray, weak: np.ndarray) -> "KeptFactors":
+        """Those of these systems' columns that still fit them (:meth:`ReusedFactors.fits`)."""
+        return KeptFactors({columns: self[columns] for columns in groups
+                            if columns in self and self[columns].fits(excluded[:, columns[0]], weak, columns)})
 
-def restore_kept(arrays: dict, count: int) -> dict:
-    """:func:`kept_arrays` taken back: ``{columns: ReusedFactors}``."""
-    kept = {}
-    for index in range(count):
-        prefix = f"kept.{index}."
-        factors = ReusedFactors.from_arrays({name[len(prefix):]: array for name, array in arrays.items()
-                                             if name.startswith(prefix)})
-        kept[factors.columns] = factors
-    return kept
+    def keep(self, system, weak: np.ndarray) -> None:
+        """Keep a freshly factored system's factors for the next steps (none if it is singular)."""
+        columns = tuple(system.columns)
+        if system.factors is None or system.blended:
+            self.pop(columns, None)
+        else:
+            self[columns] = ReusedFactors.of(system.factors, system.excluded, weak, columns)
+
+    def arrays(self) -> dict:
+        """The kept factors of each system as a checkpoint's arrays (:meth:`restored`)."""
+        return {f"kept.{index}.{name}": array for index, factors in enumerate(self.values())
+                for name, array in factors.arrays().items()}
+
+    @classmethod
+    def restored(cls, arrays: dict, count: int) -> "KeptFactors":
+        """:meth:`arrays` taken back."""
+        kept = cls()
+        for index in range(count):
+            prefix = f"kept.{index}."
+            factors = ReusedFactors.from_arrays({name[len(prefix):]: array for name, array in arrays.items()
+                                                 if name.startswith(prefix)})
+            kept[factors.columns] = factors
+        return kept
 
 
 @compiled()
