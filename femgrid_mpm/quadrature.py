@@ -95,6 +95,11 @@ class StressReconstruction:
         self.gauss_dNdx, self.gauss_dNdy = dNdx.tocsr(), dNdy.tocsr()
         self.gauss_dNdx_t, self.gauss_dNdy_t = self.gauss_dNdx.T.tocsr(), self.gauss_dNdy.T.tocsr()
 
+    @classmethod
+    def of_scene(cls, grid, scene) -> "StressReconstruction":
+        """The scene's: the polynomial the fewest points of a cell determine (it interpolates them)."""
+        return cls(grid, min(body.points_per_cell for body in scene.bodies) - 1)
+
     def cell_centres(self) -> np.ndarray:
         """Centres of the lattice cells, shape (n_cells, 2), cell ``i * ny + j``."""
         nx, ny = self.cells

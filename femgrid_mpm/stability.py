@@ -135,8 +135,7 @@ def critical_time_step(simulation) -> float:
     mass_model.assemble(N, p.mass, p.volume)
     volume = p.volume
     if simulation.scene.solver.force_quadrature == "reconstructed":  # its Gauss points where it integrates
-        points = min(body.points_per_cell for body in simulation.scene.bodies)
-        dNdx, dNdy, volume, moduli = StressReconstruction(grid, points - 1).integration_rows(
+        dNdx, dNdy, volume, moduli = StressReconstruction.of_scene(grid, simulation.scene).integration_rows(
             p.x, p.volume, p.body, dNdx, dNdy, moduli)
     omega_squared = 0.0
     try:

@@ -33,7 +33,7 @@ def test_kept_factors_solve_to_the_tolerance_of_a_direct_solve(basis):
     """A later step's matrix solved with the first step's factors: the error against scipy's
     sparse LU of the same matrix within twice the tolerance of the largest velocity at every
     node (the criterion is the preconditioned residual, ``M_0^-1 r``, which estimates the
-    error as closely as ``M_0`` is close to ``M``), and the residual within what that allows."""
+    error as closely as ``M_0`` is close to ``M``)."""
     simulation = advanced(basis)
     mass = simulation.mass
     system = mass._systems[0]
@@ -46,9 +46,6 @@ def test_kept_factors_solve_to_the_tolerance_of_a_direct_solve(basis):
     assert converged  # a random right-hand side from zero: a few iterations
     error = np.abs(solution - reference).max(axis=0)
     assert np.all(error <= 2 * mass.tolerance * np.abs(reference).max(axis=0))
-    residual = np.linalg.norm(matrix @ solution - rhs, axis=0) / np.linalg.norm(rhs, axis=0)
-    assert np.all(residual <= np.linalg.norm(matrix.toarray(), 2) * np.linalg.norm(solution - reference, axis=0)
-                  / np.linalg.norm(rhs, axis=0) * (1 + 1e-9))
 
 
 def test_applying_kept_factors_is_superlus_solve():

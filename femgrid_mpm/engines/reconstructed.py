@@ -23,10 +23,7 @@ class ReconstructedForce(Engine):
 
     def __init__(self, engine: Engine, simulation):
         self.engine = engine
-        grid = simulation.grid
-        # the polynomial the fewest points of a cell determine: it interpolates them
-        points = min(body.points_per_cell for body in simulation.scene.bodies)
-        self.reconstruction = StressReconstruction(grid, points - 1)
+        self.reconstruction = StressReconstruction.of_scene(simulation.grid, simulation.scene)
 
     def frame_velocity(self, particles) -> np.ndarray:
         return self.engine.frame_velocity(particles)

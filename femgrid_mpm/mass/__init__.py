@@ -69,7 +69,7 @@ def build_mass_model(solver, grid, cells: CellMasses, per_body: bool = False,
         if per_body:
             raise ValueError("supports with ghosts = 'mirrored' need one shared velocity field (not frictional contact)")
         # mirrored ghost nodes are tied to interior ones: their rows are not weak once folded
-        inner = _unconstrained(solver.model_copy(update={"weak_ratio": 0.0}), grid, cells, time_step, solves=False)
+        inner = _unconstrained(solver, grid, cells, time_step, solves=False, weak_ratio=0.0)
         return ConstrainedMass(inner, constraint, diagonal=not isinstance(inner, ConsistentMass))
     if per_body:
         return FieldLumpedMass(grid.n_nodes, cells)
@@ -77,8 +77,9 @@ def build_mass_model(solver, grid, cells: CellMasses, per_body: bool = False,
 
 
 def _unconstrained(solver, grid, cells: CellMasses, time_step: float | None, fixed: np.ndarray | None = None,
-                   solves: bool = True) -> MassModel:
-    """The shared field's model of the scene's kind."""
+                   solves: bool = True, weak_ratio: float | None = None) -> MassModel:
+    """The shared field's model of the scene's kind (``weak_ratio``: the scene's unless given)."""
+    weak_ratio = solver.weak_ratio if weak_ratio is None else weak_ratio
     if solver.mass == "hrz":
         return HrzMass(grid.n_nodes, cells)
     if solver.mass == "lumped":
@@ -102,8 +103,8 @@ def _unconstrained(solver, grid, cells: CellMasses, time_step: float | None, fix
         layer_width=round(grid.discretization.element_width / grid.spacing),  # in lattice steps
         time_step=time_step,
         solves=solves,
-        weak_ratio=solver.weak_ratio,
+        weak_ratio=weak_ratio,
         weak_mix=solver.weak_mix,
-        interior=interior_ratio(grid) if solver.weak_ratio > 0 and grid.nonnegative else 0.0,
+        interior=interior_ratio(grid) if weak_ratio > 0 and grid.nonnegative else 0.0,
         mix=solver.mix,
     )

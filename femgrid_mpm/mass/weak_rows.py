@@ -9,10 +9,13 @@ function only (the ring of nodes just outside a free edge or a support for
 the splines, the next node of a GIMP point whose square has just reached past
 a node line) has a small one.  Such a row has little consistent mass against
 its stiffness: the modes on it bound the step (cubic splines on the bar: 0.18
-element widths over c_p against 0.55 in the interior).  A node whose ratio is
-below ``weak_ratio`` times the interior value is lumped like a node of small
-volume fraction (:func:`.exclusion._lump_couplings`), which keeps every row
-sum and only adds positive semi-definite terms.
+element widths over c_p against 0.55 in the interior).  A row whose ratio is
+below ``weak_ratio`` times the interior value moves the share ``weak_mix`` of
+each of its couplings onto both diagonals (``weak_mix = 1`` lumps it like a node
+of small volume fraction, :func:`.exclusion._lump_couplings`), which keeps every
+row sum and only adds positive semi-definite terms.  It makes ``M`` differ from
+``N.T diag(m) N``: the projection then no longer keeps the points' kinetic
+energy, which is why it is off by default (docs/time_step.md).
 
 The mixed mass ``(1 - a) M_C + a D`` (``D`` the row sums, or where they are
 not all positive the HRZ diagonal, as the singular fallback's blend) is the
