@@ -36,6 +36,7 @@ from .particles import seed_bodies, warn_of_overlaps, warn_of_thin_bodies
 from .result import RunResult, run_result
 from .scene import Scene
 from .scene.limits import run_steps
+from .schemes import SCHEMES
 from .stability import critical_time_step
 from .state import restore_state, simulation_state
 from .step import Stage, StepContext
@@ -72,6 +73,7 @@ class Simulation:
         # walls of mirrored ghost nodes: the mass solves on v = T w (None: no such wall, no cost)
         mirrors = [mirror for mirror in (effect.mirror(self.grid) for effect in acting) if mirror is not None]
         self.constraint = NodeConstraint.combine(self.grid.n_nodes, self.fixed, mirrors) if mirrors else None
+        self.scheme = SCHEMES[scene.solver.scheme]
         self.dt = self._time_step()
         self.mass: MassModel = self.mass_model(time_step=self.dt)
         self.negative_mass = NegativeMassMonitor(scene.solver.negative_mass, applies=self.mass.divides_by_row_sums)
@@ -185,36 +187,26 @@ class Simulation:
         return ctx
 
     def advance(self, record: bool = False) -> None:
-        """One time step, paper section 3.2 steps 1-11: the central difference
-        u(t + dt) - 2 u(t) + u(t - dt) = dt^2 a(t) if the points' velocity is that of t + dt/2.
-
-        The paper starts from v(0), an error dt/2 a(0) kept by the motion (first order
-        in dt unless a(0) = 0); ``scheme = "centred"`` starts with the half step v(0) +
-        dt/2 a(0) and ends with one, the steps between the paper's (docs/accuracy.md).
+        """One time step: the scheme's sub-steps (:mod:`femgrid_mpm.schemes`), each the paper's
+        section 3.2 steps 1-11.  The paper's scheme is one sub-step, the central difference
+        u(t + dt) - 2 u(t) + u(t - dt) = dt^2 a(t) if the points' velocity is that of t + dt/2;
+        started from v(0) it misses dt/2 a(0) (first order in dt unless a(0) = 0), which the
+        centred scheme's start kick supplies (docs/accuracy.md).
         """
-        ctx, dt = self.project(), self.dt
+        ctx, dt, scheme = self.project(), self.dt, self.scheme
         if record:
             self._run(Stage.OBSERVE)
         self._guard_energy(record)
-        centred = self.scene.solver.scheme == "centred"
-        if centred and self.step_index == 0:
-            self._half_kick(ctx)
+        if scheme.start_kick and self.step_index == 0:
+            self._start_kick(ctx, scheme.start_kick * dt)
             ctx = self.project()
-        # 4-7: strain increment from the grid velocity (Eq. 18), stress (Eq. 6), internal
-        # force -(dNdx.T @ V sigma_x + dNdy.T @ V sigma_y) with the volumes of time t (Eq. 11)
-        ctx.force = self.transfer.internal_force(ctx, dt, self.materials, self.body_slices)
-        ctx.force_time = self.time + dt
-        ctx.external = {}  # then the declared forces
-        self._run(Stage.EXTERNAL_FORCE)
-        self._run(Stage.ADJUST_FORCE)
-        ctx.acceleration = self._solve(ctx.force, "acceleration")
-        self._constrain(ctx.acceleration)
-        self._book_work(ctx)
-        if centred and self.step_index == self.n_steps - 1:
-            ctx.acceleration *= 0.5  # the last velocity: that of the end time, not half a step beyond
-        # 8-10 (G2P): velocity v += dt N @ a (Eq. 19) with the new forces, position
-        # x += dt N @ v (Eq. 20) with the grid velocity of time t, density (Eq. 21)
-        checksum = self.transfer.to_points(ctx, dt)
+        last_step = self.step_index == self.n_steps - 1
+        for index, (drift, kick, at) in enumerate(zip(scheme.drifts, scheme.kicks, scheme.force_times)):
+            if index:  # 1-3 again at the moved points
+                ctx = self.project()
+            if last_step and index == scheme.passes - 1:
+                kick -= scheme.start_kick  # the last velocity: that of the end time, not beyond it
+            checksum = self._substep(ctx, drift * dt, kick / drift, self.time + at * dt)
         # 11
         self.step_index += 1
         self.time = self.step_index * dt
@@ -222,8 +214,27 @@ class Simulation:
             raise self._stop(f"the state is no longer finite (NaN or Inf){first_not_finite(self.particles, self.scene.bodies)}",
                              "not_finite")
 
-    def _half_kick(self, ctx: StepContext) -> None:
-        """The centred scheme's start, ``v += dt/2 N @ a(0)``: the stress and forces of time t."""
+    def _substep(self, ctx: StepContext, dt: float, kick_ratio: float, force_time: float) -> float:
+        """Steps 4-10 over ``dt`` (negative in a composition's middle), the velocity changed by
+        ``kick_ratio * dt * N a``; returns the finiteness checksum."""
+        # 4-7: strain increment from the grid velocity (Eq. 18), stress (Eq. 6), internal
+        # force -(dNdx.T @ V sigma_x + dNdy.T @ V sigma_y) with the volumes of time t (Eq. 11)
+        ctx.force = self.transfer.internal_force(ctx, dt, self.materials, self.body_slices)
+        ctx.force_time = force_time
+        ctx.external = {}  # then the declared forces
+        self._run(Stage.EXTERNAL_FORCE)
+        self._run(Stage.ADJUST_FORCE)
+        ctx.acceleration = self._solve(ctx.force, "acceleration")
+        self._constrain(ctx.acceleration)
+        self._book_work(ctx, kick_ratio * dt)
+        if kick_ratio != 1.0:
+            ctx.acceleration *= kick_ratio
+        # 8-10 (G2P): velocity v += dt N @ a (Eq. 19) with the new forces, position
+        # x += dt N @ v (Eq. 20) with the grid velocity of time t, density (Eq. 21)
+        return self.transfer.to_points(ctx, dt)
+
+    def _start_kick(self, ctx: StepContext, dt: float) -> None:
+        """A scheme's start, ``v += dt N @ a(0)``: the stress and forces of time t."""
         ctx.force = self.transfer.internal_force(ctx, 0.0, self.materials, self.body_slices)
         ctx.force_time = self.time
         ctx.external = {}
@@ -231,7 +242,7 @@ class Simulation:
         self._run(Stage.ADJUST_FORCE)
         acceleration = self._solve(ctx.force, "acceleration")
         self._constrain(acceleration)
-        self.transfer.kick(ctx, 0.5 * self.dt, acceleration)
+        self.transfer.kick(ctx, dt, acceleration)
 
     def _guard_energy(self, recorded: bool) -> None:
         """The runaway-energy guard (:class:`EnergyGuard`) on what is known cheaply:
@@ -274,14 +285,14 @@ class Simulation:
         except ForceNotFinite as error:  # a declared force with no value: its key, not "the state"
             raise self._stop(error.message(self.scene, self.particles), "not_finite") from None
 
-    def _book_work(self, ctx: StepContext) -> None:
-        """Work of each declared force over the step, at the mid-step grid velocity."""
+    def _book_work(self, ctx: StepContext, dt: float) -> None:
+        """Work of each declared force over a kick of ``dt``, at the kick's mid grid velocity."""
         if not ctx.external:
             return
         with np.errstate(over="ignore", invalid="ignore"):  # a work beyond 1e308: the state guard stops the run
-            mid_velocity = ctx.velocity + 0.5 * self.dt * ctx.acceleration
+            mid_velocity = ctx.velocity + 0.5 * dt * ctx.acceleration
             for name, grid_force in ctx.external.items():
-                ctx.work[name] = ctx.work.get(name, 0.0) + self.dt * float(np.sum(grid_force * mid_velocity))
+                ctx.work[name] = ctx.work.get(name, 0.0) + dt * float(np.sum(grid_force * mid_velocity))
 
     def _stop(self, message: str, reason: str) -> SimulationStopped:
         return SimulationStopped(f"step {self.step_index} (t = {self.time:.6g} s): {message}", self.step_index, self.time, reason)

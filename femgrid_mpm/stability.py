@@ -28,6 +28,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .bases import BASES
+from .schemes import SCHEMES
 from .quadrature import StressReconstruction
 
 def bloch_time_step(basis: str, mass: str, spacing: float, wave_speed: float) -> float:
@@ -100,7 +101,7 @@ def largest_eigenvalue_of_product(inverse_mass: sp.csr_matrix, stiffness: sp.csr
 
 
 def critical_time_step(simulation) -> float:
-    """``2 / omega_max`` (s) for the simulation's points, grid, supports and mass
+    """``2 / omega_max`` (s; the scheme's ``stability_limit / omega_max``, :mod:`femgrid_mpm.schemes`) for the simulation's points, grid, supports and mass
     model (as it will be assembled, weak nodes lumped); 0 if no step is stable.
 
     Lumped mass with FLIP: the grid velocity is projected afresh from the
@@ -149,7 +150,8 @@ def critical_time_step(simulation) -> float:
             omega_squared = max(omega_squared, _largest_frequency_squared(inertia, p.mass[members], free, stiffness))
     except (np.linalg.LinAlgError, spla.ArpackError, RuntimeError):
         return 0.0  # a singular consistent mass: some mode has no inertia
-    return 2.0 / math.sqrt(omega_squared) if omega_squared > 0 else math.inf
+    limit = SCHEMES[simulation.scene.solver.scheme].stability_limit  # 2: the central difference
+    return limit / math.sqrt(omega_squared) if omega_squared > 0 else math.inf
 
 
 def _largest_frequency_squared(inertia, point_mass: np.ndarray, free: np.ndarray, stiffness: sp.csr_matrix) -> float:

@@ -35,6 +35,7 @@ from pydantic import (
 
 from .. import effects
 from ..bases import BASES
+from ..schemes import SCHEMES
 from ..effects import PointLoad
 from ..expressions import compile_expression
 from ..grid import MAX_NODES, length_problem, node_count
@@ -111,8 +112,10 @@ class SolverSpec(_Model):
     ``scheme``: the time integration, ``"paper"`` (section 3.2 as written) or
     ``"centred"`` (the same step with the points' velocities half a step ahead:
     second order in dt also when the initial acceleration is not zero; see
-    :meth:`femgrid_mpm.solver.Simulation.advance` and docs/accuracy.md).  Both
-    have the same critical step (:mod:`femgrid_mpm.stability`).
+    :meth:`femgrid_mpm.solver.Simulation.advance` and docs/accuracy.md), both with
+    the critical step ``2 / omega_max`` (:mod:`femgrid_mpm.stability`), or
+    ``"yoshida4"`` (three centred sub-steps a step, fourth order, ``1.5734 /
+    omega_max``; :mod:`femgrid_mpm.schemes`).
     ``force_quadrature``: the internal force as the sum over the points
     (``"points"``, the paper's Eq. 11) or by Gauss quadrature of a stress fitted
     to the points in each filled cell (``"reconstructed"``,
@@ -138,8 +141,9 @@ class SolverSpec(_Model):
     engine: Literal["numba", "scipy"] = "numba"
     #: numba engine: threads for the tensor-product and serendipity kernels (1: serial, reproducible bit for bit)
     threads: Annotated[int, Field(ge=1, le=256)] = 1
-    #: the time integration: the paper's order, or the centred difference (half-step velocities)
-    scheme: Literal["paper", "centred"] = "paper"
+    #: the time integration (:data:`femgrid_mpm.schemes.SCHEMES`): the paper's order, the centred
+    #: difference (half-step velocities), or Yoshida's fourth-order composition of it
+    scheme: Literal[tuple(SCHEMES)] = "paper"
     #: the internal force's integral: the points' sum, or Gauss quadrature of a reconstructed stress
     force_quadrature: Literal["points", "reconstructed"] = "points"
 
@@ -291,6 +295,9 @@ class Scene(_Model):
             which = "friction" if self.contact.friction else "gap"
             raise ValueError(f"contact.{which}: applies to kind = 'frictional' only (one shared field has no "
                              "surfaces between the bodies)")
+        if self.contact is not None and SCHEMES[self.solver.scheme].passes > 1:
+            raise ValueError(f"solver.scheme: {self.solver.scheme!r} composes sub-steps of several sizes, some "
+                             "negative; contact's velocity corrections are of one step: use 'paper' or 'centred'")
         if self.contact is not None and self.contact.kind == "frictional" and self.solver.mass != "lumped":
             raise ValueError("contact.kind: 'frictional' contact needs solver.mass = \"lumped\" (one lumped field per body)")
         if self.solver.negative_mass == "threshold" and self.solver.mass == "lumped":
