@@ -71,9 +71,11 @@ class StressReconstruction:
         Degree ``m`` of the stress polynomial in each direction (``points_per_cell - 1``);
         the Gauss rule has ``ceil((d + m + 1) / 2)`` points along each axis for a basis of
         degree ``d``: exact for ``grad N . sigma_h`` on the cell.
+    order : int, optional
+        Another number of Gauss points along each axis (:class:`MassReconstruction`'s).
     """
 
-    def __init__(self, grid, degree: int):
+    def __init__(self, grid, degree: int, order: int | None = None):
         self.grid = grid
         self.degree = degree
         self.h = grid.spacing
@@ -82,7 +84,7 @@ class StressReconstruction:
         self.n_cells = nx * ny
         self.n_terms = len(tensor_exponents(degree))
         # grad N is of degree d-1 in its own axis, d in the other; sigma_h of degree m: n >= (d + m + 1) / 2
-        order = int(np.ceil((grid.definition.degree + degree + 1) / 2))
+        order = int(np.ceil((grid.definition.degree + degree + 1) / 2)) if order is None else order
         nodes, weights = np.polynomial.legendre.leggauss(order)
         gx, gy = np.meshgrid(nodes, nodes, indexing="ij")
         self.gauss_weights = (np.outer(weights, weights).ravel() * (0.5 * self.h) ** 2)
@@ -91,7 +93,8 @@ class StressReconstruction:
         self.gauss_terms = polynomial_terms(gx.ravel(), gy.ravel(), degree)  # (n_gauss, n_terms)
         self.centres = centres = self.cell_centres()
         points = (centres[:, None, :] + 0.5 * self.h * np.stack([gx.ravel(), gy.ravel()], axis=-1)[None]).reshape(-1, 2)
-        _, dNdx, dNdy = grid.shape_functions(points)
+        N, dNdx, dNdy = grid.shape_functions(points)
+        self.gauss_N = N.tocsr()
         self.gauss_dNdx, self.gauss_dNdy = dNdx.tocsr(), dNdy.tocsr()
         self.gauss_dNdx_t, self.gauss_dNdy_t = self.gauss_dNdx.T.tocsr(), self.gauss_dNdy.T.tocsr()
 
@@ -195,3 +198,45 @@ class StressReconstruction:
         return (sp.vstack([dNdx[summed], self.gauss_dNdx[at_gauss]]).tocsr(),
                 sp.vstack([dNdy[summed], self.gauss_dNdy[at_gauss]]).tocsr(),
                 weights, np.concatenate([moduli[summed], gauss_moduli]))
+
+
+class MassReconstruction:
+    """The consistent mass and the momentum by Gauss quadrature over the filled cells.
+
+    The points' sums ``N^T diag(m) N`` and ``N^T m v`` are midpoint rules too, with the
+    same edge term as the force's: where a body ends the rows of the functions that reach
+    past it err by ``(h_s^2 / 24) (N_a u)'`` at the edge, which leaves a layer of second-order
+    error along a free edge (the free bar, docs/accuracy.md).  Here, in every cell the
+    points fill (as for the stress, :meth:`StressReconstruction.fit`), the density is the
+    cell's points' mass over its area and the velocity the polynomial of degree ``m`` fitted
+    to the points' velocities, and ``rho N_a N_b`` and ``rho N_a v_h`` are integrated by the
+    tensor Gauss rule of ``max(d + 1, ceil((d + m + 1) / 2))`` points per axis, exact for both
+    (degrees ``2 d`` and ``d + m`` along each axis).  Other cells keep their points' sums.  Used with the force's
+    reconstruction, both sides of ``M a = f`` are then exact integrals over the filled cells.
+    """
+
+    def __init__(self, grid, degree: int):
+        d = grid.definition.degree
+        self.cells = StressReconstruction(grid, degree, order=max(d + 1, int(np.ceil((d + degree + 1) / 2))))
+
+    @classmethod
+    def of_scene(cls, grid, scene) -> "MassReconstruction":
+        return cls(grid, min(body.points_per_cell for body in scene.bodies) - 1)
+
+    def rows(self, x: np.ndarray, volume: np.ndarray, mass: np.ndarray, body: np.ndarray, velocity: np.ndarray,
+             point_rows: Callable[[np.ndarray], sp.csr_matrix]) -> tuple:
+        """The integration points as rows ``(N, masses, volumes, velocities)``: the points of the
+        cells integrated by their sums, then the Gauss points of the usable cells.
+        ``point_rows(mask)`` returns the shape functions of the points in ``mask``."""
+        cells = self.cells
+        coefficients, usable, cell = cells.fit(x, volume, velocity, body)
+        filled = np.flatnonzero(usable)
+        summed = ~usable[cell]
+        weights = np.tile(cells.gauss_weights, len(filled))
+        density = np.bincount(cell, weights=mass, minlength=cells.n_cells)[filled] / cells.h**2
+        at_gauss = np.einsum("gm,cmk->cgk", cells.gauss_terms, coefficients[filled]).reshape(-1, velocity.shape[1])
+        rows = cells.gauss_N[np.repeat(usable, cells.n_gauss)]
+        if summed.any():
+            rows = sp.vstack([point_rows(summed), rows]).tocsr()
+        return (rows, np.concatenate([mass[summed], np.repeat(density, cells.n_gauss) * weights]),
+                np.concatenate([volume[summed], weights]), np.concatenate([velocity[summed], at_gauss]))

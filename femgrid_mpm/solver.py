@@ -188,11 +188,7 @@ class Simulation:
 
     def advance(self, record: bool = False) -> None:
         """One time step: the scheme's sub-steps (:mod:`femgrid_mpm.schemes`), each the paper's
-        section 3.2 steps 1-11.  The paper's scheme is one sub-step, the central difference
-        u(t + dt) - 2 u(t) + u(t - dt) = dt^2 a(t) if the points' velocity is that of t + dt/2;
-        started from v(0) it misses dt/2 a(0) (first order in dt unless a(0) = 0), which the
-        centred scheme's start kick supplies (docs/accuracy.md).
-        """
+        section 3.2 steps 1-11; the paper's scheme is one, the central difference started from v(0)."""
         ctx, dt, scheme = self.project(), self.dt, self.scheme
         if record:
             self._run(Stage.OBSERVE)
@@ -371,13 +367,9 @@ class Simulation:
         return result
 
     def _at_rest(self) -> bool:
-        """The grid's mass-weighted RMS speed is below ``time.rest_speed``.
-
-        The grid velocity, not the points' own: points move with it (Eq. 20),
-        while FLIP leaves velocity noise on the points that damping on the grid
-        never removes (cubic B-splines: ~1e-6 m/s), which also shows at nodes
-        with a tiny share of mass; weighting by mass ignores those.
-        """
+        """The grid's mass-weighted RMS speed is below ``time.rest_speed``: the grid velocity moves
+        the points (Eq. 20), while FLIP leaves noise on the points' own that damping on the grid
+        never removes (cubic B-splines: ~1e-6 m/s); weighting by mass ignores nodes with a tiny share."""
         rest_speed = self.scene.time.rest_speed
         if rest_speed is None or self.time < self.scene.time.rest_after:
             return False

@@ -29,7 +29,7 @@ import scipy.sparse.linalg as spla
 
 from .bases import BASES
 from .schemes import SCHEMES
-from .quadrature import StressReconstruction
+from .quadrature import MassReconstruction, StressReconstruction
 
 def bloch_time_step(basis: str, mass: str, spacing: float, wave_speed: float) -> float:
     """The basis' classic estimate (s) for ``"lumped"`` or ``"consistent"`` mass on a grid of
@@ -133,7 +133,12 @@ def critical_time_step(simulation) -> float:
     for material, members in zip(simulation.materials, simulation.body_slices):
         lam, mu = material.lame_lambda, material.shear_modulus
         moduli[members] = [lam + 2 * mu, lam, lam + 2 * mu, mu]
-    mass_model.assemble(N, p.mass, p.volume)
+    if simulation.scene.solver.mass_quadrature == "reconstructed":  # the mass the run assembles
+        rows, masses, volumes, _ = MassReconstruction.of_scene(grid, simulation.scene).rows(
+            p.x, p.volume, p.mass, p.body, np.zeros((p.n, 1)), lambda summed: N[summed])
+        mass_model.assemble(rows, masses, volumes)
+    else:
+        mass_model.assemble(N, p.mass, p.volume)
     volume = p.volume
     if simulation.scene.solver.force_quadrature == "reconstructed":  # its Gauss points where it integrates
         dNdx, dNdy, volume, moduli = StressReconstruction.of_scene(grid, simulation.scene).integration_rows(

@@ -4,8 +4,9 @@
 ``scipy_engine.py``  :class:`ScipyTransfer` (the paper's sparse algebra) and
                      :class:`PerBodyTransfer` (the same, one field per body)
 ``numba_engine.py``  :class:`CompiledTransfer`: the kernels of :mod:`femgrid_mpm.kernels`
-``reconstructed.py`` :class:`ReconstructedForce`: another engine's passes with the internal
-                     force by Gauss quadrature of a reconstructed stress
+``reconstructed.py`` :class:`ReconstructedForce`, :class:`ReconstructedMass`: another engine's
+                     passes with the internal force, or the mass and momentum, by Gauss
+                     quadrature of fields reconstructed from the points
 """
 
 from __future__ import annotations
@@ -13,24 +14,27 @@ from __future__ import annotations
 from ..kernels.compiled import note_compilation
 from .engine import Engine
 from .numba_engine import CompiledTransfer
-from .reconstructed import ReconstructedForce
+from .reconstructed import ReconstructedForce, ReconstructedMass
 from .scipy_engine import PerBodyTransfer, ScipyTransfer
 
 #: ``[solver] engine`` -> engine
 ENGINES = {"scipy": ScipyTransfer, "numba": CompiledTransfer}
 
-__all__ = ["ENGINES", "CompiledTransfer", "Engine", "PerBodyTransfer", "ReconstructedForce", "ScipyTransfer", "engine_for"]
+__all__ = ["ENGINES", "CompiledTransfer", "Engine", "PerBodyTransfer", "ReconstructedForce", "ReconstructedMass", "ScipyTransfer", "engine_for"]
 
 
 def engine_for(simulation) -> Engine:
     """The engine of a simulation: the scene's, or the per-body one for a mass model with
     one field per body (which only the scipy algebra implements).  The first in a process
     whose kernel cache is cold says that they are being compiled (:func:`note_compilation`);
-    wrapped in :class:`ReconstructedForce` for ``force_quadrature = "reconstructed"``."""
+    wrapped in :class:`ReconstructedForce` for ``force_quadrature = "reconstructed"`` and in
+    :class:`ReconstructedMass` for ``mass_quadrature = "reconstructed"``."""
     note_compilation()
     if simulation.mass.assembly.per_body:
         return PerBodyTransfer(simulation)
     engine = ENGINES[simulation.scene.solver.engine](simulation)
     if simulation.scene.solver.force_quadrature == "reconstructed":
-        return ReconstructedForce(engine, simulation)
+        engine = ReconstructedForce(engine, simulation)
+    if simulation.scene.solver.mass_quadrature == "reconstructed":
+        engine = ReconstructedMass(engine, simulation)
     return engine

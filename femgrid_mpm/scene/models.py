@@ -120,6 +120,10 @@ class SolverSpec(_Model):
     (``"points"``, the paper's Eq. 11) or by Gauss quadrature of a stress fitted
     to the points in each filled cell (``"reconstructed"``,
     :mod:`femgrid_mpm.quadrature`): exact at a body's edges on the grid lines.
+    ``mass_quadrature``: the consistent mass and the momentum as the points' sums
+    (``"points"``, Eqs. 16-17) or by Gauss quadrature over the filled cells of each
+    cell's density and of a velocity fitted to its points (``"reconstructed"``); with
+    the reconstructed force, no edge term is left at a free edge on the grid lines.
     """
 
     mass: Literal["lumped", "consistent", "hrz"] = "lumped"
@@ -146,6 +150,8 @@ class SolverSpec(_Model):
     scheme: Literal[tuple(SCHEMES)] = "paper"
     #: the internal force's integral: the points' sum, or Gauss quadrature of a reconstructed stress
     force_quadrature: Literal["points", "reconstructed"] = "points"
+    #: the consistent mass and momentum: the points' sums, or Gauss quadrature over the filled cells
+    mass_quadrature: Literal["points", "reconstructed"] = "points"
 
 
 class Material(_Model):
@@ -309,22 +315,33 @@ class Scene(_Model):
                 )
             if self.contact is not None and self.contact.kind == "frictional":
                 raise ValueError("solver.negative_mass: 'threshold' is implemented for one shared field, not for 'frictional' contact")
-        if self.solver.force_quadrature == "reconstructed":
-            if BASES[self.grid.basis].sized:
-                raise ValueError(f"solver.force_quadrature: 'reconstructed' needs functions that are polynomials on "
-                                 f"each lattice cell; {self.grid.basis}'s depend on the points' size")
-            if min(body.points_per_cell for body in self.bodies) < 2:
-                raise ValueError("solver.force_quadrature: 'reconstructed' fits a polynomial to a cell's points: "
-                                 "give every body points_per_cell >= 2")
-            if self.contact is not None and self.contact.kind == "frictional":
-                raise ValueError("solver.force_quadrature: 'reconstructed' is implemented for one shared field, "
-                                 "not for 'frictional' contact")
+        if self.solver.mass_quadrature == "reconstructed":
+            if self.solver.mass != "consistent":
+                raise ValueError("solver.mass_quadrature: 'reconstructed' integrates the consistent mass: "
+                                 "give solver.mass = \"consistent\"")
+            if len({body.material.density for body in self.bodies}) > 1:
+                raise ValueError("solver.mass_quadrature: 'reconstructed' is implemented for bodies of one density")
+        for key in ("force_quadrature", "mass_quadrature"):
+            if getattr(self.solver, key) == "reconstructed":
+                self._check_reconstruction(key)
         sizes = sorted({body.points_per_cell for body in self.bodies})
         if BASES[self.grid.basis].sized and len(sizes) > 1:
             # the weights are laid out for one point size (the points' initial spacing)
             raise ValueError(f"bodies: {self.grid.basis} weighs every point as a square of one size, spacing / "
                              f"points_per_cell: give every body the same points_per_cell (got {sizes})")
         return self
+
+    def _check_reconstruction(self, key: str) -> None:
+        """What a Gauss quadrature of fields fitted in the cells needs (``solver.KEY = "reconstructed"``)."""
+        if BASES[self.grid.basis].sized:
+            raise ValueError(f"solver.{key}: 'reconstructed' needs functions that are polynomials on "
+                             f"each lattice cell; {self.grid.basis}'s depend on the points' size")
+        if min(body.points_per_cell for body in self.bodies) < 2:
+            raise ValueError(f"solver.{key}: 'reconstructed' fits a polynomial to a cell's points: "
+                             "give every body points_per_cell >= 2")
+        if self.contact is not None and self.contact.kind == "frictional":
+            raise ValueError(f"solver.{key}: 'reconstructed' is implemented for one shared field, "
+                             "not for 'frictional' contact")
 
     @classmethod
     def model_validate(cls, obj, **options) -> "Scene":
