@@ -71,7 +71,7 @@ def test_the_mass_and_momentum_are_the_exact_integrals_over_the_filled_cells(bas
 
 
 def bar_errors(spacing: float, **solver) -> tuple[float, float]:
-    """The free bar's exact first mode (nu = 0), consistent cubic splines, 3 x 3 points,
+    """The free bar's exact first mode (nu = 0), consistent cubic splines, 4 x 4 points,
     ``scheme = "yoshida4"`` at ``dt = "auto"``, to t = 1 s, with the updated-Lagrangian term
     removed: ``2 u(A) - u(2 A)`` at A = 1e-4 m/s (the motion's departure from the linear mode is
     linear in A; the position round-off at so small an amplitude as would make it negligible
@@ -82,7 +82,7 @@ def bar_errors(spacing: float, **solver) -> tuple[float, float]:
     for amplitude in (1e-4, 2e-4):
         current = bundled_variant("vibrating_bar_exact", "bspline3", "consistent", **{
             "solver.scheme": "yoshida4", "grid.spacing": spacing, "time.end": 1.0, "output": None,
-            "bodies.0.velocity": [f"{amplitude}*cos(pi*x/5)", "0"],
+            "bodies.0.points_per_cell": 4, "bodies.0.velocity": [f"{amplitude}*cos(pi*x/5)", "0"],
             "reference.constants": {"A": amplitude, "L": 5.0, "w": w}, **{f"solver.{k}": v for k, v in solver.items()}})
         simulation = Simulation(current)
         p = simulation.run().particles
@@ -96,9 +96,9 @@ def bar_errors(spacing: float, **solver) -> tuple[float, float]:
 
 def test_the_free_bar_converges_at_fourth_order_with_the_mass_and_force_reconstructed():
     """With the points' sums the bar's ends err at second order (the whole bar's RMS at 2.5:
-    1.46e-4 -> 2.62e-5 from h = 0.5 to 0.25, ratio 5.6); with the mass, momentum and force
-    integrated over the cells the error falls 16 times (5.24e-6 -> 3.30e-7, order 4.0), at the
-    ends as inside (6.71e-6 -> 4.32e-7): both ratios above 8 (third order), and the error at
+    8.19e-5 -> 1.43e-5 from h = 0.5 to 0.25, ratio 5.7); with the mass, momentum and force
+    integrated over the cells the error falls 16 times (5.44e-6 -> 3.42e-7, order 4.0), at the
+    ends as inside (7.27e-6 -> 4.79e-7): both ratios above 8 (third order), and the error at
     h = 0.5 below a tenth of the points' sums'."""
     reconstructed = {"force_quadrature": "reconstructed", "mass_quadrature": "reconstructed"}
     whole_coarse, ends_coarse = bar_errors(0.5, **reconstructed)
@@ -117,6 +117,7 @@ def test_the_engines_agree_with_the_reconstructed_mass():
     for engine in ("scipy", "numba"):
         current = bundled_variant("vibrating_bar_exact", "bspline3", "consistent", **{
             "solver.engine": engine, "solver.mass_quadrature": "reconstructed", "solver.linear_solver": "direct",
+            "bodies.0.points_per_cell": 4,
             "solver.force_quadrature": "reconstructed", "time.dt": 0.005, "time.end": 0.2, "output": None})
         results[engine] = Simulation(current).run().particles
     for name, of in (("position", lambda p: p.x), ("velocity", lambda p: p.v), ("stress", lambda p: p.stress)):
@@ -128,7 +129,9 @@ def test_the_engines_agree_with_the_reconstructed_mass():
 @pytest.mark.parametrize("changes, message", [
     ({"solver.mass": "lumped"}, "solver.mass_quadrature: 'reconstructed' integrates the consistent mass"),
     ({"grid.basis": "gimp"}, "solver.mass_quadrature: 'reconstructed' needs functions that are polynomials"),
-    ({"bodies.0.points_per_cell": 1}, "solver.mass_quadrature: 'reconstructed' fits a polynomial"),
+    ({"bodies.0.points_per_cell": 1}, "solver.mass_quadrature: 'reconstructed' needs points_per_cell >= 4"),
+    ({"bodies.0.points_per_cell": 3}, "solver.mass_quadrature: 'reconstructed' needs points_per_cell >= 4 with bspline3"),
+    ({"grid.basis": "q2", "bodies.0.points_per_cell": 2}, "needs points_per_cell >= 3 with q2"),
 ])
 def test_a_scene_whose_mass_cannot_be_reconstructed_is_refused_in_one_line(changes, message):
     with pytest.raises(SceneError, match=message.replace("(", r"\(")) as error:

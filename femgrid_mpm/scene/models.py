@@ -120,10 +120,8 @@ class SolverSpec(_Model):
     (``"points"``, the paper's Eq. 11) or by Gauss quadrature of a stress fitted
     to the points in each filled cell (``"reconstructed"``,
     :mod:`femgrid_mpm.quadrature`): exact at a body's edges on the grid lines.
-    ``mass_quadrature``: the consistent mass and the momentum as the points' sums
-    (``"points"``, Eqs. 16-17) or by Gauss quadrature over the filled cells of each
-    cell's density and of a velocity fitted to its points (``"reconstructed"``); with
-    the reconstructed force, no edge term is left at a free edge on the grid lines.
+    ``mass_quadrature``: the consistent mass and momentum as the points' sums or by Gauss
+    quadrature over the filled cells (``"reconstructed"``, :mod:`femgrid_mpm.quadrature`).
     """
 
     mass: Literal["lumped", "consistent", "hrz"] = "lumped"
@@ -321,6 +319,9 @@ class Scene(_Model):
                                  "give solver.mass = \"consistent\"")
             if len({body.material.density for body in self.bodies}) > 1:
                 raise ValueError("solver.mass_quadrature: 'reconstructed' is implemented for bodies of one density")
+            # a fit that holds the basis' fields keeps M, K the Gauss integrals (3 x 3 cubic: ran away)
+            if min(body.points_per_cell for body in self.bodies) < BASES[self.grid.basis].degree + 1:
+                raise ValueError(f"solver.mass_quadrature: 'reconstructed' needs points_per_cell >= {BASES[self.grid.basis].degree + 1} with {self.grid.basis} (its degree plus one: the fitted fields must hold the basis' on a cell, or the step is not stable)")  # noqa: E501
         for key in ("force_quadrature", "mass_quadrature"):
             if getattr(self.solver, key) == "reconstructed":
                 self._check_reconstruction(key)
