@@ -51,7 +51,7 @@ from .reused import KeptFactors
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
 from .scale import CellMasses
 from .singular import singular_near_edges
-from .sparse import _CompiledCSR
+from .sparse import PatternMatrix
 from .system import _System
 from .weak_rows import lumped_and_mixed, mix_target, weak_by_ratio
 
@@ -141,6 +141,7 @@ class ConsistentMass(MassModel):
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
         # "auto" below DIRECT_LIMIT: the factors kept from an earlier step, per system's columns
         self._kept = KeptFactors()
+        self._over_pattern = PatternMatrix()
 
     def state(self) -> tuple[dict, dict]:
         """What carries from step to step, ``(arrays, values)``: CG's warm-start
@@ -176,9 +177,7 @@ class ConsistentMass(MassModel):
         pattern, lumped, node_volume = sums.pattern, sums.mass, sums.volume
         self.lumped = lumped
         self.scale = self.cells.uniform if sums.scale is None else sums.scale
-        matrix = _CompiledCSR(pattern.matrix())
-        matrix.upper_start = pattern.diagonal  # symmetric bit for bit, in stencil order
-        self._prepare(matrix, node_volume, pattern.diagonal)
+        self._prepare(self._over_pattern.of(pattern), node_volume, pattern.diagonal)
 
     def _prepare(self, matrix: sp.csr_matrix, node_volume: np.ndarray | None, diagonal_index=None) -> None:
         diagonal = matrix.diagonal() if diagonal_index is None else matrix.data[diagonal_index]

@@ -56,8 +56,10 @@ class _System:
             if not in_place:  # on a copy: the other component's system needs the assembled entries too
                 data = data.copy()
                 _exclude_in_place(matrix.indptr, matrix.indices, data, diagonal_index, excluded)
-            # the index arrays are shared with the (internal) assembled matrix: nothing sorts them
-            reduced = _CompiledCSR((data, matrix.indices, matrix.indptr), shape=matrix.shape, copy=False)
+            # the index arrays are shared with the (internal) assembled matrix: nothing sorts them;
+            # made in place, the system is that matrix itself (a new scipy object cost ~25 us)
+            reduced = matrix if in_place and isinstance(matrix, _CompiledCSR) else \
+                _CompiledCSR((data, matrix.indices, matrix.indptr), shape=matrix.shape, copy=False)
             reduced.upper_start = diagonal_index  # exclusion and lumping keep the symmetry and the order
             inverse_diagonal = 1.0 / data[diagonal_index]
         return cls(columns, excluded, reduced, inverse_diagonal, _factor(reduced) if direct else None)
