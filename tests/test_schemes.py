@@ -182,15 +182,15 @@ def test_the_bars_remaining_error_is_second_order_at_its_free_ends_and_higher_in
 
 @pytest.mark.parametrize("scheme", ["centred", "yoshida4"])
 def test_a_run_resumed_half_way_repeats_the_whole_run_bit_for_bit(scheme):
-    """The mode on rollers at h = 1/8, 20 steps: the state after 10 (``Simulation.state``) taken
+    """The mode on rollers at h = 1/8 to t = 0.05 s (16 or 20 steps): the state half-way (``Simulation.state``) taken
     into a new simulation that runs on gives the same positions and velocities, bit for bit (the
     start kick belongs to step 0 alone, the shortened last kick to the run's last step)."""
     current = bundled_scene("manufactured_rollers").with_overrides(**{
         "grid.spacing": 0.125, "solver.scheme": scheme, "time.end": 0.05, "output": None})
     whole = Simulation(current).run().particles
     first = Simulation(current)
-    assert first.n_steps == 20
-    for _ in range(10):
+    assert first.n_steps >= 16
+    for _ in range(first.n_steps // 2):
         first.advance()
     resumed = Simulation(current)
     resumed.restore(*first.state())
