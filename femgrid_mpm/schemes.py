@@ -31,6 +31,7 @@ harmonic oscillator; the critical step of a run is ``stability_limit / omega_max
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -60,7 +61,7 @@ class Scheme:
     stability_limit: float
     order: int
 
-    @property
+    @functools.cached_property
     def force_times(self) -> tuple[float, ...]:
         """The instant of each sub-step's forces, in units of dt after the step's start: the
         drifts' running sum, the last exactly 1 (the stress of the step's end)."""

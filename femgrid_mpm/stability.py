@@ -28,8 +28,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .bases import BASES
-from .schemes import SCHEMES
 from .quadrature import MassReconstruction, StressReconstruction
+from .schemes import SCHEMES
 
 def bloch_time_step(basis: str, mass: str, spacing: float, wave_speed: float) -> float:
     """The basis' classic estimate (s) for ``"lumped"`` or ``"consistent"`` mass on a grid of
@@ -101,8 +101,9 @@ def largest_eigenvalue_of_product(inverse_mass: sp.csr_matrix, stiffness: sp.csr
 
 
 def critical_time_step(simulation) -> float:
-    """``2 / omega_max`` (s; the scheme's ``stability_limit / omega_max``, :mod:`femgrid_mpm.schemes`) for the simulation's points, grid, supports and mass
-    model (as it will be assembled, weak nodes lumped); 0 if no step is stable.
+    """``2 / omega_max`` (s) for the simulation's points, grid, supports and mass model (as it
+    will be assembled, weak nodes lumped), or the scheme's ``stability_limit / omega_max``
+    (:mod:`femgrid_mpm.schemes`); 0 if no step is stable.
 
     Lumped mass with FLIP: the grid velocity is projected afresh from the
     points every step, ``v <- M_L^-1 N^T m (v_p + dt N a)``, so an increment

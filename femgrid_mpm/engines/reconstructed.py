@@ -72,10 +72,29 @@ class ReconstructedMass(EngineVariant):
         self.reconstruction = MassReconstruction.of_scene(simulation.grid, simulation.scene)
 
     def to_grid(self, ctx: StepContext, mass) -> np.ndarray:
-        self.engine.to_grid(ctx, mass)  # the engine's own pass: its shape functions, its sums (replaced here)
+        # the engine's own pass for its shape functions; its sums of the mass are not the run's,
+        # so they are not assembled (a consistent mass prepares, and may factor, what it is given)
+        self.engine.to_grid(ctx, _PointsMoved(mass))
         p = ctx.particles
         relative = p.v - ctx.frame_velocity
         rows, masses, volumes, velocities = self.reconstruction.rows(
             p.x, p.volume, p.mass, p.body, relative, lambda summed: self.grid.shape_functions(p.x[summed])[0])
         mass.assemble(rows, masses, volumes)
         return rows.T @ (masses[:, None] * velocities)
+
+
+class _PointsMoved:
+    """The mass an engine's P2G is handed by :class:`ReconstructedMass`: it hears that the points
+    moved and drops the points' sums, which the variant replaces by its own."""
+
+    def __init__(self, mass):
+        self.mass = mass
+
+    def points_moved(self) -> None:
+        self.mass.points_moved()
+
+    def assemble(self, N, m_p, volume_p=None) -> None:
+        """The points' sums, dropped."""
+
+    def assemble_sums(self, sums) -> None:
+        """The compiled P2G's sums, dropped."""

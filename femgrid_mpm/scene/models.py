@@ -109,13 +109,9 @@ class SolverSpec(_Model):
     (``"auto"``: SuperLU up to 5000 active nodes, CG beyond);
     ``cg_tolerance`` CG's relative residual; ``engine``
     the implementation of the step's transfers (:mod:`femgrid_mpm.kernels`).
-    ``scheme``: the time integration, ``"paper"`` (section 3.2 as written) or
-    ``"centred"`` (the same step with the points' velocities half a step ahead:
-    second order in dt also when the initial acceleration is not zero; see
-    :meth:`femgrid_mpm.solver.Simulation.advance` and docs/accuracy.md), both with
-    the critical step ``2 / omega_max`` (:mod:`femgrid_mpm.stability`), or
-    ``"yoshida4"`` (three centred sub-steps a step, fourth order, ``1.5734 /
-    omega_max``; :mod:`femgrid_mpm.schemes`).
+    ``scheme``: the time integration, ``"paper"`` (section 3.2 as written),
+    ``"centred"`` (second order in dt from any start) or ``"yoshida4"`` (fourth order,
+    three sub-steps a step): :mod:`femgrid_mpm.schemes`, with each one's critical step.
     ``force_quadrature``: the internal force as the sum over the points
     (``"points"``, the paper's Eq. 11) or by Gauss quadrature of a stress fitted
     to the points in each filled cell (``"reconstructed"``,
@@ -322,8 +318,9 @@ class Scene(_Model):
             # a fit that holds the basis' fields keeps M, K the Gauss integrals (3 x 3 cubic: ran away)
             if min(body.points_per_cell for body in self.bodies) < BASES[self.grid.basis].degree + 1:
                 raise ValueError(f"solver.mass_quadrature: 'reconstructed' needs points_per_cell >= {BASES[self.grid.basis].degree + 1} with {self.grid.basis} (its degree plus one: the fitted fields must hold the basis' on a cell, or the step is not stable)")  # noqa: E501
-        for key in ("force_quadrature", "mass_quadrature"):
-            if getattr(self.solver, key) == "reconstructed":
+        for key, quadrature in (("force_quadrature", self.solver.force_quadrature),
+                                ("mass_quadrature", self.solver.mass_quadrature)):
+            if quadrature == "reconstructed":
                 self._check_reconstruction(key)
         sizes = sorted({body.points_per_cell for body in self.bodies})
         if BASES[self.grid.basis].sized and len(sizes) > 1:
