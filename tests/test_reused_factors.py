@@ -1,5 +1,7 @@
 """The consistent mass solved by CG preconditioned by kept factors ("auto" below the direct
-limit): the solution against a direct solve of the same matrix, and the refactor triggers."""
+limit, on systems too large to factor every step): the solution against a direct solve of the
+same matrix, and the refactor triggers.  The blocks here are small enough for q1 and q2 to be
+factored every step (:mod:`femgrid_mpm.mass.ldl`), which :func:`kept_factors_only` turns off."""
 
 import sys
 import warnings
@@ -10,12 +12,18 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from femgrid_mpm.mass import ldl
 from femgrid_mpm.mass.direct import _factor
 from femgrid_mpm.mass.reused import REFACTOR_ITERATIONS, ReusedFactors
 from femgrid_mpm.solver import Simulation
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from step import block_scene  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def kept_factors_only(monkeypatch):
+    monkeypatch.setattr(ldl, "EVERY_STEP_NODES", 0)
 
 
 def advanced(basis, linear_solver="auto", steps=6, n=100):

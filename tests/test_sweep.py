@@ -255,6 +255,9 @@ def test_a_changed_scene_is_run_again(tmp_path, run_cli):
     ('scene = "vibrating_bar"\n[report]\nerror = "error_min"\n', "report.error"),
     ('scene = "vibrating_bar"\n[vary\n', "not valid TOML"),
     ('[vary]\n"grid.basis" = ["q1"]\n', "scene"),
+    ('scene = "vibrating_bar"\n[vary]\n"grid.basis" = ["q1"]\n[[skip]]\n"grid.spacing" = 0.5\n', "skip[0]"),
+    ('scene = "vibrating_bar"\n[vary]\n"grid.basis" = ["q1", "q2"]\n[[skip]]\n"grid.basis" = "q3"\n', "skip[0]"),
+    ('scene = "vibrating_bar"\n[vary]\n"grid.basis" = ["q1"]\n[[skip]]\n"grid.basis" = "q1"\n', "skip"),
 ])
 def test_a_bad_sweep_file_is_one_line_and_nothing_runs(tmp_path, run_cli, content, key):
     path = tmp_path / "bad.toml"
@@ -277,8 +280,25 @@ def test_bundled_sweep_files_plan(run_cli):
     files = sorted(BUNDLED_SWEEPS.glob("*.toml"))
     assert files
     for path in files:
-        runs = plan(read_sweep(path), path)
-        assert len({run.key for run in runs}) == len(runs) == math.prod(len(v) for v in read_sweep(path).vary.values())
+        spec = read_sweep(path)
+        runs = plan(spec, path)
+        product = math.prod(len(v) for v in spec.vary.values())
+        assert len({run.key for run in runs}) == len(runs) == (product if not spec.skip else len(runs))
+        assert len(runs) <= product
+
+
+def test_skip_leaves_out_the_matching_combinations(tmp_path):
+    from femgrid_mpm.sweep import plan, read_sweep
+
+    path = sweep_file(tmp_path, '"grid.basis" = ["q1", "q2"]\n"solver.mass" = ["consistent", "lumped"]\n'
+                                '"solver.mix" = [0, 0.25, 0.5]', 0.1,
+                      extra='[[skip]]\n"solver.mass" = "lumped"\n"solver.mix" = [0.25, 0.5]\n'
+                            '[[skip]]\n"grid.basis" = "q2"\n"solver.mix" = 0.5\n')
+    runs = plan(read_sweep(path), path)
+    kept = {(r.varied["grid.basis"], r.varied["solver.mass"], r.varied["solver.mix"]) for r in runs}
+    # 12 combinations; lumped with a mix (4) and q2 with mix 0.5 (2, one of them lumped already) out
+    assert kept == {("q1", "consistent", 0), ("q1", "consistent", 0.25), ("q1", "consistent", 0.5),
+                    ("q1", "lumped", 0), ("q2", "consistent", 0), ("q2", "consistent", 0.25), ("q2", "lumped", 0)}
 
 
 def test_sweep_on_an_existing_scheduler(tmp_path, run_cli):

@@ -45,6 +45,7 @@ import scipy.sparse as sp
 
 from .cg import _preconditioned_cg, initial_guess
 from .direct import _direct_solve, _factor, _smallest_pivot_node
+from .ldl import every_step_layouts
 from .exclusion import _exclude_in_place, unexcluded_apply, unexcluded_matrix
 from .preconditioners import TensorPreconditioner
 from .reused import KeptFactors
@@ -142,6 +143,8 @@ class ConsistentMass(MassModel):
         # "auto" below DIRECT_LIMIT: the factors kept from an earlier step, per system's columns
         self._kept = KeptFactors()
         self._over_pattern = PatternMatrix()
+        self._layout = None  # (active, weak, excluded, groups, direct) of the last step's systems
+        self._every_step = {}  # the layout's systems factored every step: {columns: SymbolicLDL}
 
     def state(self) -> tuple[dict, dict]:
         """What carries from step to step, ``(arrays, values)``: CG's warm-start
@@ -161,6 +164,7 @@ class ConsistentMass(MassModel):
         self._previous = {kind: tuple(np.array(arrays[f"previous.{kind}.{index}"]) for index in range(count))
                           for kind, count in values["previous"].items()}
         self._kept = KeptFactors.restored(arrays, values.get("kept", 0))
+        self._layout = None
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
         weighted = N.multiply(m_p[:, None]).tocsr()
@@ -202,33 +206,50 @@ class ConsistentMass(MassModel):
         self._assembled, self._correction, self._full = matrix, None, None
         if not self.solves:
             return
-        # empty and fixed degrees of freedom leave the system (identity rows);
-        # one system for both components when they are fixed alike
-        excluded = ~self.active[:, None] if self.fixed is None else (~self.active[:, None] | self.fixed)
-        excluded = np.broadcast_to(excluded, (self.n_nodes, 2))
-        groups = [(0, 1)] if np.array_equal(excluded[:, 0], excluded[:, 1]) else [(0,), (1,)]
-        self._direct = self.linear_solver == "direct" or (
-            self.linear_solver == "auto" and np.count_nonzero(self.active) <= DIRECT_LIMIT
-        )
-        # below DIRECT_LIMIT, "auto" keeps a system's factors while they fit it (see .reused)
-        kept = self._kept.fitting(groups, excluded, self._weak) if self._keeps_factors else KeptFactors()
+        # the systems' layout follows from the active and weak nodes alone (the supports are fixed
+        # for the run), which most steps leave as they were: then it is the last step's
+        same = self._layout is not None and np.array_equal(self.active, self._layout[0]) and \
+            np.array_equal(self._weak, self._layout[1])
+        if same:
+            excluded, groups, self._direct = self._layout[2:]
+        else:
+            # empty and fixed degrees of freedom leave the system (identity rows);
+            # one system for both components when they are fixed alike
+            excluded = ~self.active[:, None] if self.fixed is None else (~self.active[:, None] | self.fixed)
+            excluded = np.broadcast_to(excluded, (self.n_nodes, 2))
+            groups = [(0, 1)] if np.array_equal(excluded[:, 0], excluded[:, 1]) else [(0,), (1,)]
+            self._direct = self.linear_solver == "direct" or (
+                self.linear_solver == "auto" and np.count_nonzero(self.active) <= DIRECT_LIMIT
+            )
+            self._layout = (self.active.copy(), self._weak.copy(), excluded, groups, self._direct)
+        # below DIRECT_LIMIT, "auto" factors a small system every step (.ldl, its ordering and
+        # structure the layout's), and keeps a larger one's factors while they fit it (.reused;
+        # kept over an unchanged layout, they were made for it)
+        if not same:
+            self._every_step = every_step_layouts(matrix, diagonal_index, excluded, groups) \
+                if self._keeps_factors and diagonal_index is not None else {}
+        kept = KeptFactors() if not self._keeps_factors else \
+            self._kept.fresh(groups) if same else self._kept.fitting(groups, excluded, self._weak)
+        kept = KeptFactors({columns: factors for columns, factors in kept.items() if columns not in self._every_step})
         if diagonal_index is not None and len(groups) == 1:
             # the one system is made from the assembled matrix in place (a copy of its data was
             # ~25 ns per point-step for cubic splines at 1e5 points); M is R with the entries the
             # exclusion overwrote put back
             self._correction = _exclude_in_place(matrix.indptr, matrix.indices, matrix.data, diagonal_index,
                                                  excluded[:, 0])
-            self._systems = [_System.build(matrix, [0, 1], excluded[:, 0], self._direct and not kept,
-                                           diagonal_index, in_place=True)]
+            self._systems = [_System.build(matrix, [0, 1], excluded[:, 0], self._direct and not kept and not
+                                           self._every_step, diagonal_index, in_place=True,
+                                           every_step=self._every_step.get((0, 1)))]
         else:
-            self._systems = [_System.build(matrix, list(columns), excluded[:, columns[0]],
-                                           self._direct and columns not in kept, diagonal_index)
+            self._systems = [_System.build(matrix, list(columns), excluded[:, columns[0]], self._direct and columns
+                                           not in kept and columns not in self._every_step, diagonal_index,
+                                           every_step=self._every_step.get(columns))
                              for columns in groups]
         if self._keeps_factors:
             self._kept = kept
             for system in self._systems:
                 system.kept = kept.get(tuple(system.columns))
-                if system.kept is None:
+                if system.kept is None and system.every_step is None:
                     kept.keep(system, self._weak)
 
     @property
@@ -333,7 +354,8 @@ class ConsistentMass(MassModel):
             solution, converged = self._solve(system, right_hand_side(), kind)
         if not converged:
             if self.fallback != "blend":
-                how = ("its block near the bodies' edges has a singular pivot" if system.singular else
+                how = ("a pivot of its factorization is singular" if system.every_step is not None else
+                       "its block near the bodies' edges has a singular pivot" if system.singular else
                        "the direct solve left a large residual" if self._direct else "CG did not converge")
                 raise SingularMassError(
                     f"the consistent mass matrix is singular or nearly so: {how} on the {kind} system "
@@ -370,6 +392,10 @@ class ConsistentMass(MassModel):
 
     def _solve(self, system: "_System", rhs: np.ndarray, kind: str) -> tuple[np.ndarray, bool]:
         if self._direct:
+            if system.every_step is not None and system.factors is None and not system.blended:
+                if system.ldl is not None:  # this step's own L D L^T (.ldl)
+                    return system.ldl.solve(rhs), True
+                return np.zeros_like(rhs), False  # a pivot said singular
             if system.kept is not None:  # CG preconditioned by an earlier step's factors
                 guess = self._initial_guess(rhs, kind, system)
                 solution, converged, iterations = system.kept.solve(system.matrix, rhs, guess, self.tolerance)

@@ -119,6 +119,12 @@ class KeptFactors(dict):
         return KeptFactors({columns: self[columns] for columns in groups
                             if columns in self and self[columns].fits(excluded[:, columns[0]], weak, columns)})
 
+    def fresh(self, groups) -> "KeptFactors":
+        """Those of these systems' columns not stale: :meth:`fitting` when the excluded and
+        weak nodes are those the kept factors were last checked against."""
+        return KeptFactors({columns: self[columns] for columns in groups
+                            if columns in self and not self[columns].stale})
+
     def keep(self, system, weak: np.ndarray) -> None:
         """Keep a freshly factored system's factors for the next steps (none if it is singular)."""
         columns = tuple(system.columns)

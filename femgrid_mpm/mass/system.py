@@ -10,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .direct import _factor
+from .ldl import NumericLDL, SymbolicLDL
 from .exclusion import _exclude_in_place
 from .preconditioners import BoundaryLayer
 from .reused import ReusedFactors
@@ -35,6 +36,10 @@ class _System:
     #: "auto" below the direct limit: an earlier step's factors that precondition CG on this
     #: system (:mod:`.reused`), instead of its own ``factors``
     kept: "ReusedFactors | None" = None
+    #: "auto" on a small system: its layout's ordering and structure (:mod:`.ldl`) and this
+    #: step's factors on them (None where a pivot said singular), instead of ``factors``
+    every_step: "SymbolicLDL | None" = None
+    ldl: "NumericLDL | None" = None
 
     def boundary_layer(self, lattice_shape: tuple, weak: np.ndarray) -> "BoundaryLayer | None":
         """CG's boundary layer (:class:`BoundaryLayer`), built at the first solve of the
@@ -45,8 +50,10 @@ class _System:
 
     @classmethod
     def build(cls, matrix: sp.csr_matrix, columns: list, excluded: np.ndarray, direct: bool,
-              diagonal_index: np.ndarray | None = None, in_place: bool = False) -> "_System":
-        """``in_place``: ``matrix`` has already been reduced in place (its data is the system's)."""
+              diagonal_index: np.ndarray | None = None, in_place: bool = False,
+              every_step: "SymbolicLDL | None" = None) -> "_System":
+        """``in_place``: ``matrix`` has already been reduced in place (its data is the system's);
+        ``every_step``: factored by the compiled L D L^T on that layout instead of SuperLU."""
         if diagonal_index is None:
             keep = sp.diags((~excluded).astype(float))
             reduced = (keep @ matrix @ keep + sp.diags(excluded.astype(float))).tocsr()
@@ -62,7 +69,12 @@ class _System:
                 _CompiledCSR((data, matrix.indices, matrix.indptr), shape=matrix.shape, copy=False)
             reduced.upper_start = diagonal_index  # exclusion and lumping keep the symmetry and the order
             inverse_diagonal = 1.0 / data[diagonal_index]
-        return cls(columns, excluded, reduced, inverse_diagonal, _factor(reduced) if direct else None)
+        system = cls(columns, excluded, reduced, inverse_diagonal, _factor(reduced) if direct else None)
+        if every_step is not None:
+            system.every_step = every_step
+            system.ldl, system.weakest = every_step.factor(reduced.data)
+            system.singular = system.ldl is None  # its weakest node, for the stop's message
+        return system
 
     def blend_with(self, target: np.ndarray, weight: float, direct: bool) -> None:
         """The fallback: ``(1 - weight) M + weight diag(target)`` on the kept rows."""
@@ -72,6 +84,7 @@ class _System:
         self.matrix = ((1.0 - weight) * self.matrix + weight * sp.diags(kept_target)).tocsr()
         self.inverse_diagonal = 1.0 / self.matrix.diagonal()
         self.factors = _factor(self.matrix) if direct else None
+        self.ldl = None
         self.blended = True
         self.kept = None
         self._layer = False

@@ -7,6 +7,9 @@
     [vary]                           # dotted keys of the scene, as with --set; the runs are the product
     "grid.basis" = ["q1", "q2"]
     "grid.spacing" = [0.5, 0.25]
+    [[skip]]                         # combinations left out: each key's value (or one of its list)
+    "grid.basis" = "q1"
+    "grid.spacing" = 0.25
     [set]                            # dotted keys set in every run
     "time.end" = 1.0
     [report]
@@ -68,6 +71,9 @@ class SweepSpec(BaseModel):
     particles: bool = False
     max_runs: Annotated[int, Field(ge=1)] = DEFAULT_MAX_RUNS
     vary: dict[str, Annotated[list[Any], Field(min_length=1)]] = {}
+    #: combinations left out of the product: one matches when each of the entry's keys has its value
+    #: (or one of its list), e.g. a key that only one value of another key reads
+    skip: list[Annotated[dict[str, Any], Field(min_length=1)]] = []
     set: dict[str, Any] = {}
     report: ReportSpec = ReportSpec()
 
@@ -141,7 +147,22 @@ def read_sweep(path) -> SweepSpec:
                 spelled_as = "" if _shown(values[first]) == _shown(value) else f" (as {_shown(values[first])})"
                 raise SweepError(f"{path}: {_location(('vary', key, index))}: {_shown(value)} is already in the "
                                  f"list{spelled_as}")
+    varied = {normal_key(key): {normal_value(v) for v in values} for key, values in spec.vary.items()}
+    for index, entry in enumerate(spec.skip):
+        for key, values in entry.items():
+            if normal_key(key) not in varied:
+                raise SweepError(f"{path}: skip[{index}]: {key!r} is not a key of [vary]")
+            for value in values if isinstance(values, list) else [values]:
+                if not isinstance(value, Scalar) or normal_value(value) not in varied[normal_key(key)]:
+                    raise SweepError(f"{path}: skip[{index}]: {key} = {_shown(value)} is not one of its [vary] values")
     return spec
+
+
+def skipped(spec: SweepSpec, varied: dict) -> bool:
+    """Whether one combination of ``[vary]`` matches an entry of ``[[skip]]``."""
+    values = {normal_key(key): normal_value(value) for key, value in varied.items()}
+    return any(all(values[normal_key(key)] in {normal_value(v) for v in (wanted if isinstance(wanted, list) else [wanted])}
+                   for key, wanted in entry.items()) for entry in spec.skip)
 
 
 def normal_key(key: str) -> str:
@@ -209,6 +230,9 @@ def plan(spec: SweepSpec, sweep_path) -> list[PlannedRun]:
         fixed["output.particles"] = False  # a sweep's runs write no particle series unless asked
     keys = list(spec.vary)
     combinations = [dict(zip(keys, values)) for values in itertools.product(*spec.vary.values())]
+    combinations = [varied for varied in combinations if not skipped(spec, varied)]
+    if not combinations:
+        raise SweepError(f"{sweep_path}: skip: leaves no run")
     names = run_keys(combinations)
     runs = []
     for name, varied in zip(names, combinations):

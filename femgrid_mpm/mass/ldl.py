@@ -1,0 +1,268 @@
+"""A compiled sparse ``L D L^T`` of the consistent mass, analysed once per layout and refactored every step.
+
+Below a few thousand active nodes SuperLU's factorization was most of a consistent step, and
+kept over the steps as CG's preconditioner it still left two to four preconditioned
+iterations per solve (:mod:`.reused`).  Here the costly part of a factorization, the
+ordering and the structure of ``L``, is done once for the step's *layout*, the matrix's
+stored structure restricted to the free degrees of freedom, and kept while the free nodes
+stay the same; each step then factors its own matrix in one compiled pass and solves
+exactly, both solves of the step with the same factors.
+
+* the ordering: SuperLU's minimum degree on ``A + A^T`` (what :mod:`.direct` uses), taken
+  from a factorization of a matrix of the same structure, once per layout;
+* the symbolic pass: the elimination tree and each column's count of ``L``;
+* the numeric pass, up-looking: row ``k`` of ``L`` from a sparse triangular solve on
+  column ``k`` of ``A``'s upper triangle, whose pattern is the reach in the tree.
+
+``M`` is positive semi-definite (a Gram matrix with positive weights, its weak rows and
+mixes adding positive semi-definite terms), so no pivoting is needed, and a pivot
+``D_k`` below :data:`.direct.PIVOT_RATIO` of its diagonal entry ``A_kk`` says the node's
+function is reproduced by the others, as SuperLU's pivots do in :mod:`.direct`: the
+matrix is then singular and the caller falls back as it does there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..kernels.arithmetic import fused
+from ..kernels.compiled import compiled
+from .direct import PIVOT_RATIO
+
+#: a layout is factored every step when it has at most this many free nodes (a larger one
+#: fills more than it pays: q1 at 2601 free nodes measured 1.6 ms a factorization against
+#: 0.7 ms a solve of CG on kept factors) ...
+EVERY_STEP_NODES = 1500
+#: ... and its numeric pass, ``sum(c_j^2)`` over the columns' counts ``c_j`` of ``L``, is at
+#: most this many times ``L``'s entries (a solve of two columns sweeps ``4 nnz(L)``; CG on kept
+#: factors takes three to five such sweeps and products a solve, two solves a step):
+#: q1, q2, serendipity at 1e3 points 15-18 (factor 56 us, two solves 36 us, against CG's
+#: 140 us), cubic splines 58 and gimp 37 (factor 600 and 240 us) are left to the kept factors
+EVERY_STEP_WORK = 24
+
+
+@dataclass
+class SymbolicLDL:
+    """The ordering and the structure of ``L`` for one layout of a system's matrix.
+
+    ``order[j]`` is the node eliminated ``j``-th (free nodes only); column ``j`` of the
+    permuted upper triangle holds the entries ``source[upper_indptr[j]:upper_indptr[j+1]]``
+    of the matrix's ``data`` at the rows ``upper_rows[...]`` (positions ``< j``), its
+    diagonal ``diagonal_source[j]``."""
+
+    excluded: np.ndarray
+    order: np.ndarray
+    upper_indptr: np.ndarray
+    upper_rows: np.ndarray
+    source: np.ndarray
+    diagonal_source: np.ndarray
+    parent: np.ndarray
+    lower_indptr: np.ndarray
+
+    @classmethod
+    def analyse(cls, indptr: np.ndarray, indices: np.ndarray, diagonal_index: np.ndarray,
+                excluded: np.ndarray) -> "SymbolicLDL":
+        """The layout of a CSR structure with every diagonal entry (``diagonal_index``) whose
+        ``excluded`` rows and columns are left out."""
+        free = np.flatnonzero(~excluded)
+        compact = np.full(len(excluded), -1, dtype=np.int64)
+        compact[free] = np.arange(len(free))
+        rows = np.repeat(np.arange(len(excluded)), np.diff(indptr))
+        keep = (compact[rows] >= 0) & (compact[indices] >= 0)
+        structure = sp.csc_matrix((np.ones(int(keep.sum())), (compact[rows[keep]], compact[indices[keep]])),
+                                  shape=(len(free), len(free)))
+        # the ordering of a diagonally dominant matrix of this structure (the values do not enter it)
+        degree = np.asarray(structure.sum(axis=0)).ravel()
+        surrogate = (sp.diags(2.0 * degree + 1.0) - structure).tocsc()
+        ordering = spla.splu(surrogate, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True}).perm_c
+        order = np.empty(len(free), dtype=np.int64)
+        order[ordering] = free  # SuperLU's perm_c[i]: where compact column i is eliminated
+        position = np.full(len(excluded), -1, dtype=np.int64)
+        position[order] = np.arange(len(order))
+        upper_indptr, upper_rows, source = _permuted_upper(indptr.astype(np.int64), indices.astype(np.int64),
+                                                           order, position)
+        parent, counts = _elimination_tree(upper_indptr, upper_rows)
+        lower_indptr = np.zeros(len(order) + 1, dtype=np.int64)
+        np.cumsum(counts, out=lower_indptr[1:])
+        return cls(excluded.copy(), order, upper_indptr, upper_rows, source,
+                   diagonal_index[order].astype(np.int64), parent, lower_indptr)
+
+    @property
+    def every_step(self) -> bool:
+        """Whether factoring this layout every step is cheaper than CG on kept factors
+        (:data:`EVERY_STEP_NODES`, :data:`EVERY_STEP_WORK`)."""
+        counts = np.diff(self.lower_indptr)
+        return len(self.order) <= EVERY_STEP_NODES and \
+            float(np.sum(counts.astype(float) ** 2)) <= EVERY_STEP_WORK * max(self.factor_entries, 1)
+
+    @property
+    def factor_entries(self) -> int:
+        """Entries of ``L`` below its diagonal."""
+        return int(self.lower_indptr[-1])
+
+    def factor(self, data: np.ndarray) -> "tuple[NumericLDL | None, int | None]":
+        """``(L D L^T, None)`` of the matrix whose entries are ``data`` (this layout's
+        structure), or ``(None, node)`` if it is singular: the node of the first pivot below
+        :data:`PIVOT_RATIO` of its diagonal entry."""
+        lower_rows = np.empty(self.factor_entries, dtype=np.int64)
+        lower_data = np.empty(self.factor_entries)
+        pivots = np.empty(len(self.order))
+        weakest = _numeric(data, self.upper_indptr, self.upper_rows, self.source, self.diagonal_source,
+                           self.parent, self.lower_indptr, lower_rows, lower_data, pivots, PIVOT_RATIO)
+        if weakest >= 0:
+            return None, int(self.order[weakest])
+        return NumericLDL(self, lower_rows, lower_data, pivots), None
+
+
+def every_step_layouts(matrix, diagonal_index: np.ndarray, excluded: np.ndarray, groups) -> dict:
+    """``{columns: SymbolicLDL}`` of the systems (``groups`` of columns, ``excluded`` (n, 2))
+    that are factored every step (:attr:`SymbolicLDL.every_step`)."""
+    layouts = {}
+    for columns in groups:
+        if np.count_nonzero(~excluded[:, columns[0]]) > EVERY_STEP_NODES:
+            continue
+        symbolic = SymbolicLDL.analyse(matrix.indptr, matrix.indices, diagonal_index, excluded[:, columns[0]])
+        if symbolic.every_step:
+            layouts[tuple(columns)] = symbolic
+    return layouts
+
+
+@dataclass
+class NumericLDL:
+    """One step's factors on a :class:`SymbolicLDL`."""
+
+    symbolic: SymbolicLDL
+    lower_rows: np.ndarray
+    lower_data: np.ndarray
+    pivots: np.ndarray
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """``A^-1 rhs`` for rhs (n_nodes, k), zero on the excluded nodes."""
+        out = np.zeros((rhs.shape[0], rhs.shape[1]))
+        _solve(np.ascontiguousarray(rhs, dtype=float), out, self.symbolic.order, self.symbolic.lower_indptr,
+               self.lower_rows, self.lower_data, self.pivots)
+        return out
+
+
+@compiled()
+def _permuted_upper(indptr, indices, order, position):
+    """Column ``j`` of ``P^T A P``'s strict upper triangle from the CSR rows of node
+    ``order[j]`` (``A`` symmetric), with each entry's index in ``A``'s data."""
+    n = len(order)
+    counts = np.zeros(n + 1, dtype=np.int64)
+    for j in range(n):
+        node = order[j]
+        for entry in range(indptr[node], indptr[node + 1]):
+            i = position[indices[entry]]
+            if i >= 0 and i < j:
+                counts[j + 1] += 1
+    upper_indptr = np.cumsum(counts)
+    rows = np.empty(upper_indptr[n], dtype=np.int64)
+    source = np.empty(upper_indptr[n], dtype=np.int64)
+    for j in range(n):
+        node = order[j]
+        slot = upper_indptr[j]
+        for entry in range(indptr[node], indptr[node + 1]):
+            i = position[indices[entry]]
+            if i >= 0 and i < j:
+                rows[slot] = i
+                source[slot] = entry
+                slot += 1
+    return upper_indptr, rows, source
+
+
+@compiled()
+def _elimination_tree(upper_indptr, upper_rows):
+    """The parent of each column in the elimination tree and each column's count of
+    entries of ``L`` below the diagonal: row ``k`` of ``L`` is the set of columns met
+    walking up the tree from each ``i`` of column ``k``'s upper entries until ``k``."""
+    n = len(upper_indptr) - 1
+    parent = np.full(n, -1, dtype=np.int64)
+    counts = np.zeros(n, dtype=np.int64)
+    mark = np.full(n, -1, dtype=np.int64)
+    for k in range(n):
+        mark[k] = k
+        for entry in range(upper_indptr[k], upper_indptr[k + 1]):
+            i = upper_rows[entry]
+            while mark[i] != k:
+                if parent[i] == -1:
+                    parent[i] = k
+                counts[i] += 1  # L[k, i] is an entry
+                mark[i] = k
+                i = parent[i]
+    return parent, counts
+
+
+@compiled()
+def _numeric(data, upper_indptr, upper_rows, source, diagonal_source, parent, lower_indptr, lower_rows,
+             lower_data, pivots, pivot_ratio):
+    """The numeric ``L D L^T``, row by row: returns -1, or the position of the first
+    pivot below ``pivot_ratio`` of its diagonal entry (or not finite)."""
+    n = len(upper_indptr) - 1
+    y = np.zeros(n)  # row k of L D, scattered
+    mark = np.full(n, -1, dtype=np.int64)
+    filled = np.zeros(n, dtype=np.int64)  # entries of each column of L made so far
+    reach = np.empty(n, dtype=np.int64)
+    path = np.empty(n, dtype=np.int64)
+    for k in range(n):
+        mark[k] = k
+        top = n
+        for entry in range(upper_indptr[k], upper_indptr[k + 1]):
+            i = upper_rows[entry]
+            y[i] += data[source[entry]]
+            length = 0
+            while mark[i] != k:  # the columns this entry reaches, in the tree's order
+                path[length] = i
+                length += 1
+                mark[i] = k
+                i = parent[i]
+            while length > 0:
+                top -= 1
+                length -= 1
+                reach[top] = path[length]
+        diagonal = data[diagonal_source[k]]
+        d = diagonal
+        for slot in range(top, n):
+            i = reach[slot]
+            yi = y[i]
+            y[i] = 0.0
+            start = lower_indptr[i]
+            end = start + filled[i]
+            for p in range(start, end):
+                y[lower_rows[p]] = fused(-lower_data[p], yi, y[lower_rows[p]])
+            factor = yi / pivots[i]
+            d = fused(-factor, yi, d)
+            lower_rows[end] = k
+            lower_data[end] = factor
+            filled[i] += 1
+        if not d >= pivot_ratio * diagonal:  # NaN too
+            return k
+        pivots[k] = d
+    return -1
+
+
+@compiled()
+def _solve(rhs, out, order, lower_indptr, lower_rows, lower_data, pivots):
+    """``out[order] = L^-T D^-1 L^-1 rhs[order]``, column by column of rhs."""
+    n = len(order)
+    x = np.empty(n)
+    for c in range(rhs.shape[1]):
+        for j in range(n):
+            x[j] = rhs[order[j], c]
+        for j in range(n):  # L, unit diagonal, by columns
+            xj = x[j]
+            for p in range(lower_indptr[j], lower_indptr[j + 1]):
+                x[lower_rows[p]] = fused(-lower_data[p], xj, x[lower_rows[p]])
+        for j in range(n):
+            x[j] = x[j] / pivots[j]
+        for j in range(n - 1, -1, -1):  # L^T
+            xj = x[j]
+            for p in range(lower_indptr[j], lower_indptr[j + 1]):
+                xj = fused(-lower_data[p], x[lower_rows[p]], xj)
+            x[j] = xj
+        for j in range(n):
+            out[order[j], c] = x[j]
