@@ -57,11 +57,13 @@ class ReusedFactors:
 
     @classmethod
     def of(cls, factors, excluded: np.ndarray, weak: np.ndarray, columns) -> "ReusedFactors":
-        lower = sp.tril(factors.L, k=-1, format="csc")
-        upper = sp.csc_matrix(factors.U)
-        upper_diagonal = upper.diagonal().copy()
-        upper = sp.triu(upper, k=1, format="csc")
-        arrays = [(m.indptr.astype(np.int64), m.indices.astype(np.int64), m.data.astype(float)) for m in (lower, upper)]
+        # one compiled pass each: scipy's tril and triu went through COO (13 of the 39 ms of a
+        # refactorization of cubic splines at 1e4 points)
+        n = factors.shape[0]
+        lower, upper = (sp.csc_matrix(m) for m in (factors.L, factors.U))
+        upper_diagonal = np.zeros(n)
+        arrays = [_off_diagonal(m.indptr.astype(np.int64), m.indices.astype(np.int64), m.data.astype(float),
+                                diagonal) for m, diagonal in ((lower, np.zeros(n)), (upper, upper_diagonal))]
         return cls(arrays[0], arrays[1], upper_diagonal, factors.perm_r.astype(np.int64),
                    factors.perm_c.astype(np.int64), excluded.copy(), weak.copy(), tuple(columns))
 
@@ -148,6 +150,31 @@ class KeptFactors(dict):
                                                  if name.startswith(prefix)})
             kept[factors.columns] = factors
         return kept
+
+
+@compiled()
+def _off_diagonal(indptr, indices, data, diagonal):
+    """A CSC matrix without its diagonal entries, which go into ``diagonal``; the order of the
+    others kept."""
+    n = len(indptr) - 1
+    kept = np.zeros(n + 1, dtype=np.int64)
+    for j in range(n):
+        for entry in range(indptr[j], indptr[j + 1]):
+            if indices[entry] == j:
+                diagonal[j] += data[entry]
+            else:
+                kept[j + 1] += 1
+    out_indptr = np.cumsum(kept)
+    out_indices = np.empty(out_indptr[n], dtype=np.int64)
+    out_data = np.empty(out_indptr[n])
+    for j in range(n):
+        slot = out_indptr[j]
+        for entry in range(indptr[j], indptr[j + 1]):
+            if indices[entry] != j:
+                out_indices[slot] = indices[entry]
+                out_data[slot] = data[entry]
+                slot += 1
+    return out_indptr, out_indices, out_data
 
 
 @compiled()
