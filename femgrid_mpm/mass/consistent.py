@@ -321,6 +321,10 @@ class ConsistentMass(MassModel):
         if moving and self.fixed is not None:
             coupling = self.apply(np.where(self.fixed, frame, 0.0))
         for system in self._systems:
+            if system.ldl is not None and coupling is None and (self._mix_excess is None or not moving):
+                # this step's exact factors, which read the free rows only and are zero elsewhere
+                solution[:, system.columns] = system.ldl.solve(rhs[:, system.columns])
+                continue
             part = np.where(system.excluded[:, None], 0.0, rhs[:, system.columns])
             coupled = None if coupling is None else np.where(system.excluded[:, None], 0.0, coupling[:, system.columns])
             if not part.any() and (coupled is None or not coupled.any()):  # e.g. the relative momentum of a rigid motion
