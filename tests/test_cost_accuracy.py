@@ -42,7 +42,8 @@ def test_every_bundled_sweep_plans(name):
     assert len(runs) == {"bar_convergence": 8 * 3 * 4, "manufactured_convergence": 8 * 3 * 4,
                          "cantilever_convergence": 7 * 3, "bar_time_steps": 16,
                          "manufactured_large_convergence": 5 * 2 * 3, "drifting_bar_convergence": 5 * 4,
-                         "manufactured_rollers": 8 * 3 * 3 * 4, "rollers_quadrature": 2 * 2 * 2 * 3}[name]
+                         "manufactured_rollers": 8 * 3 * 3 * 4, "rollers_quadrature": 2 * 2 * 2 * 3,
+                         "mixed_mass": 3 * (3 + 1) * 4}[name]  # three mixes of consistent mass, and lumped
 
 
 def test_the_vibration_energy_error_is_the_balance_over_the_largest_strain(tmp_path):

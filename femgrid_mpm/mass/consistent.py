@@ -52,7 +52,7 @@ from .reused import KeptFactors
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
 from .scale import CellMasses
 from .singular import singular_near_edges
-from .sparse import PatternMatrix
+from .sparse import PatternMatrix, _CompiledCSR
 from .system import _System
 from .weak_rows import lumped_and_mixed, mix_target, weak_by_ratio
 
@@ -145,6 +145,7 @@ class ConsistentMass(MassModel):
         self._over_pattern = PatternMatrix()
         self._layout = None  # (active, weak, excluded, groups, direct) of the last step's systems
         self._every_step = {}  # the layout's systems factored every step: {columns: SymbolicLDL}
+        self._edge_layouts = {}
 
     def state(self) -> tuple[dict, dict]:
         """What carries from step to step, ``(arrays, values)``: CG's warm-start
@@ -226,8 +227,10 @@ class ConsistentMass(MassModel):
         # structure the layout's), and keeps a larger one's factors while they fit it (.reused;
         # kept over an unchanged layout, they were made for it)
         if not same:
-            self._every_step = every_step_layouts(matrix, diagonal_index, excluded, groups) \
-                if self._keeps_factors and diagonal_index is not None else {}
+            self._edge_layouts = {}  # CG's test of singularity near the edges (.singular), per system
+        if not same or diagonal_index is None:  # the scipy path's structure is its product's, of this step
+            self._every_step = {} if not self._keeps_factors else \
+                every_step_layouts(matrix, excluded, groups, diagonal_index, self._every_step)
         kept = KeptFactors() if not self._keeps_factors else \
             self._kept.fresh(groups) if same else self._kept.fitting(groups, excluded, self._weak)
         kept = KeptFactors({columns: factors for columns, factors in kept.items() if columns not in self._every_step})
@@ -238,13 +241,14 @@ class ConsistentMass(MassModel):
             self._correction = _exclude_in_place(matrix.indptr, matrix.indices, matrix.data, diagonal_index,
                                                  excluded[:, 0])
             self._systems = [_System.build(matrix, [0, 1], excluded[:, 0], self._direct and not kept and not
-                                           self._every_step, diagonal_index, in_place=True,
-                                           every_step=self._every_step.get((0, 1)))]
+                                           self._every_step, diagonal_index, in_place=True)]
         else:
             self._systems = [_System.build(matrix, list(columns), excluded[:, columns[0]], self._direct and columns
-                                           not in kept and columns not in self._every_step, diagonal_index,
-                                           every_step=self._every_step.get(columns))
+                                           not in kept and columns not in self._every_step, diagonal_index)
                              for columns in groups]
+        for system in self._systems:
+            if tuple(system.columns) in self._every_step:
+                system.factor_every_step(self._every_step[tuple(system.columns)], matrix.data)
         if self._keeps_factors:
             self._kept = kept
             for system in self._systems:
@@ -381,7 +385,9 @@ class ConsistentMass(MassModel):
         also CG on kept factors: a matrix that became singular since they were made does not stop it."""
         if (self._direct and system.kept is None) or self.nonnegative or system.blended or self.lattice is None:
             return False
-        return singular_near_edges(system, self.lattice, self.active, self.layer_width)
+        compiled = isinstance(system.matrix, _CompiledCSR) and system.matrix.upper_start is not None
+        return singular_near_edges(system, self.lattice, self.active, self.layer_width,
+                                   self._edge_layouts if compiled else None)
 
     def _weakest_node(self, system: "_System", rhs: np.ndarray, solution: np.ndarray) -> int | None:
         """Where a failed solve's matrix is weakest (for the stop's message): the node of the

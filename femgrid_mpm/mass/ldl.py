@@ -62,6 +62,7 @@ class SymbolicLDL:
     diagonal_source: np.ndarray
     parent: np.ndarray
     lower_indptr: np.ndarray
+    structure: tuple  # (indptr, indices) analysed
 
     @classmethod
     def analyse(cls, indptr: np.ndarray, indices: np.ndarray, diagonal_index: np.ndarray,
@@ -89,7 +90,12 @@ class SymbolicLDL:
         lower_indptr = np.zeros(len(order) + 1, dtype=np.int64)
         np.cumsum(counts, out=lower_indptr[1:])
         return cls(excluded.copy(), order, upper_indptr, upper_rows, source,
-                   diagonal_index[order].astype(np.int64), parent, lower_indptr)
+                   diagonal_index[order].astype(np.int64), parent, lower_indptr, (indptr.copy(), indices.copy()))
+
+    def describes(self, matrix, excluded: np.ndarray) -> bool:
+        """Whether this layout is that of ``matrix``'s structure with these excluded nodes."""
+        return (np.array_equal(excluded, self.excluded) and np.array_equal(matrix.indptr, self.structure[0])
+                and np.array_equal(matrix.indices, self.structure[1]))
 
     @property
     def every_step(self) -> bool:
@@ -118,17 +124,37 @@ class SymbolicLDL:
         return NumericLDL(self, lower_rows, lower_data, pivots), None
 
 
-def every_step_layouts(matrix, diagonal_index: np.ndarray, excluded: np.ndarray, groups) -> dict:
+def every_step_layouts(matrix, excluded: np.ndarray, groups, diagonal_index: np.ndarray | None = None,
+                       last: dict | None = None) -> dict:
     """``{columns: SymbolicLDL}`` of the systems (``groups`` of columns, ``excluded`` (n, 2))
-    that are factored every step (:attr:`SymbolicLDL.every_step`)."""
+    that are factored every step (:attr:`SymbolicLDL.every_step`).  Without ``diagonal_index``
+    (the scipy engine's product, its structure its own each step) the diagonal is found, and
+    ``last``'s layouts are kept where the structure and the excluded nodes are theirs."""
+    if diagonal_index is None:
+        diagonal_index = _diagonal_index(matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64))
     layouts = {}
     for columns in groups:
-        if np.count_nonzero(~excluded[:, columns[0]]) > EVERY_STEP_NODES:
+        free = ~excluded[:, columns[0]]
+        if np.count_nonzero(free) > EVERY_STEP_NODES or np.any(diagonal_index[free] < 0):
             continue
-        symbolic = SymbolicLDL.analyse(matrix.indptr, matrix.indices, diagonal_index, excluded[:, columns[0]])
+        symbolic = (last or {}).get(tuple(columns))
+        if symbolic is None or not symbolic.describes(matrix, excluded[:, columns[0]]):
+            symbolic = SymbolicLDL.analyse(matrix.indptr, matrix.indices, diagonal_index, excluded[:, columns[0]])
         if symbolic.every_step:
             layouts[tuple(columns)] = symbolic
     return layouts
+
+
+@compiled()
+def _diagonal_index(indptr, indices):
+    """Each row's diagonal entry in a CSR structure, -1 where it has none."""
+    n = len(indptr) - 1
+    index = np.full(n, -1, dtype=np.int64)
+    for i in range(n):
+        for entry in range(indptr[i], indptr[i + 1]):
+            if indices[entry] == i:
+                index[i] = entry
+    return index
 
 
 @dataclass

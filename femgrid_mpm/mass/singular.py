@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from .direct import PIVOT_RATIO, _pivots, _rows_and_block
+from .ldl import SymbolicLDL
 from .preconditioners import _near_empty_nodes
 
 
-def singular_near_edges(system, lattice: np.ndarray, active: np.ndarray, layer_width: int) -> bool:
+def singular_near_edges(system, lattice: np.ndarray, active: np.ndarray, layer_width: int,
+                        layouts: dict | None = None) -> bool:
     """Whether CG's system is singular, decided as the direct solver decides, for a
     signed basis (q2, serendipity): by SuperLU's pivots (:data:`PIVOT_RATIO`) of its
     block on the kept nodes within one element of an empty node or of the grid's
@@ -29,9 +31,25 @@ def singular_near_edges(system, lattice: np.ndarray, active: np.ndarray, layer_w
     than functions, is singular in its interior: only the direct solver
     finds that.)  Non-negative bases lump their weakly supported nodes
     instead (:meth:`_prepare`) and are not checked.
+
+    ``layouts``, kept by the caller while the active nodes stay, holds each system's block as a
+    compiled ``L D L^T``'s ordering and structure (:mod:`.ldl`), so that a step's test is one
+    numeric pass (q2 at 1e4 points: SuperLU's ordering and factorization of the block, with
+    scipy's extraction of it, were ~1 ms a step); without it SuperLU factors the block.
     """
     if system.singular is None:
         system.singular, system.weakest = False, None
+        if layouts is not None:
+            columns = tuple(system.columns)
+            if columns not in layouts:
+                layer = _near_empty_nodes(lattice, ~active, layer_width) & ~system.excluded
+                matrix = system.matrix
+                layouts[columns] = None if not layer.any() else SymbolicLDL.analyse(
+                    matrix.indptr, matrix.indices, matrix.upper_start, ~layer)
+            if layouts[columns] is not None:
+                factors, weakest = layouts[columns].factor(system.matrix.data)
+                system.singular, system.weakest = factors is None, weakest
+            return system.singular
         layer = _near_empty_nodes(lattice, ~active, layer_width) & ~system.excluded
         nodes = np.flatnonzero(layer)
         if nodes.size:

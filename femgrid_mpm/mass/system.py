@@ -50,10 +50,8 @@ class _System:
 
     @classmethod
     def build(cls, matrix: sp.csr_matrix, columns: list, excluded: np.ndarray, direct: bool,
-              diagonal_index: np.ndarray | None = None, in_place: bool = False,
-              every_step: "SymbolicLDL | None" = None) -> "_System":
-        """``in_place``: ``matrix`` has already been reduced in place (its data is the system's);
-        ``every_step``: factored by the compiled L D L^T on that layout instead of SuperLU."""
+              diagonal_index: np.ndarray | None = None, in_place: bool = False) -> "_System":
+        """``in_place``: ``matrix`` has already been reduced in place (its data is the system's)."""
         if diagonal_index is None:
             keep = sp.diags((~excluded).astype(float))
             reduced = (keep @ matrix @ keep + sp.diags(excluded.astype(float))).tocsr()
@@ -69,12 +67,14 @@ class _System:
                 _CompiledCSR((data, matrix.indices, matrix.indptr), shape=matrix.shape, copy=False)
             reduced.upper_start = diagonal_index  # exclusion and lumping keep the symmetry and the order
             inverse_diagonal = 1.0 / data[diagonal_index]
-        system = cls(columns, excluded, reduced, inverse_diagonal, _factor(reduced) if direct else None)
-        if every_step is not None:
-            system.every_step = every_step
-            system.ldl, system.weakest = every_step.factor(reduced.data)
-            system.singular = system.ldl is None  # its weakest node, for the stop's message
-        return system
+        return cls(columns, excluded, reduced, inverse_diagonal, _factor(reduced) if direct else None)
+
+    def factor_every_step(self, symbolic: "SymbolicLDL", data: np.ndarray) -> None:
+        """This step's ``L D L^T`` on its layout (:mod:`.ldl`) of the matrix whose entries are
+        ``data`` (the assembled one: its free rows and columns are this system's)."""
+        self.every_step = symbolic
+        self.ldl, self.weakest = symbolic.factor(data)
+        self.singular = self.ldl is None  # its weakest node, for the stop's message
 
     def blend_with(self, target: np.ndarray, weight: float, direct: bool) -> None:
         """The fallback: ``(1 - weight) M + weight diag(target)`` on the kept rows."""
