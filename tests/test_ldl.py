@@ -75,9 +75,32 @@ def test_small_systems_are_factored_every_step_and_large_fills_are_not():
     times L's entries); cubic splines (58) keep their factors as CG's preconditioner."""
     for basis in ("q1", "q2", "serendipity"):
         system = advanced(basis).mass._systems[0]
-        assert system.every_step is not None and system.ldl is not None and system.kept is None
-    system = advanced("bspline3").mass._systems[0]
-    assert system.every_step is None and system.kept is not None
+        assert system.layout.every_step and system.ldl is not None and system.kept is None
+    mass = advanced("bspline3").mass
+    assert not mass._layout.small[(0, 1)].every_step and mass._systems[0].kept is not None
+
+
+def test_kept_factors_from_the_compiled_factorization():
+    """Cubic splines at 1e3 points keep the L D L^T of the step that factored (as ``U = D L^T``
+    and one permutation): applied, they are its solve to 1e-12; a later step's matrix solved
+    with them by CG is scipy's sparse LU solve within twice the tolerance of the largest."""
+    simulation = advanced("bspline3", steps=1)
+    mass = simulation.mass
+    system = mass._systems[0]
+    assert system.layout is not None and system.ldl is not None  # the first step factors
+    kept = mass._kept[(0, 1)]
+    np.testing.assert_array_equal(kept.row_permutation, kept.column_permutation)
+    rhs = np.where(system.excluded[:, None], 0.0, np.random.default_rng(4).normal(size=(len(system.excluded), 2)))
+    exact = system.ldl.solve(rhs)
+    assert np.abs(kept.apply(rhs) - exact).max() <= 1e-12 * np.abs(exact).max()
+    for _ in range(4):
+        simulation.advance()
+    system = mass._systems[0]
+    assert system.kept is kept and system.layout is None
+    reference = spla.spsolve(sp.csc_matrix(system.matrix), rhs)
+    solution, converged, _ = kept.solve(system.matrix, rhs, np.zeros_like(rhs), mass.tolerance)
+    assert converged
+    assert np.all(np.abs(solution - reference).max(axis=0) <= 2 * mass.tolerance * np.abs(reference).max(axis=0))
 
 
 @pytest.mark.parametrize("basis", ["q1", "q2", "serendipity"])

@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .consistent import DIRECT_LIMIT, ConsistentMass
+from .consistent import ConsistentMass
+from .layout import DIRECT_LIMIT
 from .constraint import ConstrainedMass, NodeConstraint
 from .diagonal import HrzMass, LumpedMass, positive_weights
 from .per_body import FieldLumpedMass

@@ -45,8 +45,8 @@ import scipy.sparse as sp
 
 from .cg import _preconditioned_cg, initial_guess
 from .direct import _direct_solve, _factor, _smallest_pivot_node
-from .ldl import every_step_layouts
-from .exclusion import _exclude_in_place, unexcluded_apply, unexcluded_matrix
+from .exclusion import unexcluded_apply, unexcluded_matrix
+from .layout import SystemsLayout, make_systems
 from .preconditioners import TensorPreconditioner
 from .reused import KeptFactors
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
@@ -55,10 +55,6 @@ from .singular import singular_near_edges
 from .sparse import PatternMatrix, _CompiledCSR
 from .system import _System
 from .weak_rows import lumped_and_mixed, mix_target, weak_by_ratio
-
-#: largest number of active nodes for which "auto" factors the matrix
-DIRECT_LIMIT = 5000
-
 
 @dataclass
 class ConsistentMass(MassModel):
@@ -143,9 +139,7 @@ class ConsistentMass(MassModel):
         # "auto" below DIRECT_LIMIT: the factors kept from an earlier step, per system's columns
         self._kept = KeptFactors()
         self._over_pattern = PatternMatrix()
-        self._layout = None  # (active, weak, excluded, groups, direct) of the last step's systems
-        self._every_step = {}  # the layout's systems factored every step: {columns: SymbolicLDL}
-        self._edge_layouts = {}
+        self._layout = None  # the systems' layout (.layout), kept while the active and weak nodes stay
 
     def state(self) -> tuple[dict, dict]:
         """What carries from step to step, ``(arrays, values)``: CG's warm-start
@@ -207,54 +201,16 @@ class ConsistentMass(MassModel):
         self._assembled, self._correction, self._full = matrix, None, None
         if not self.solves:
             return
-        # the systems' layout follows from the active and weak nodes alone (the supports are fixed
-        # for the run), which most steps leave as they were: then it is the last step's
-        same = self._layout is not None and np.array_equal(self.active, self._layout[0]) and \
-            np.array_equal(self._weak, self._layout[1])
-        if same:
-            excluded, groups, self._direct = self._layout[2:]
-        else:
-            # empty and fixed degrees of freedom leave the system (identity rows);
-            # one system for both components when they are fixed alike
-            excluded = ~self.active[:, None] if self.fixed is None else (~self.active[:, None] | self.fixed)
-            excluded = np.broadcast_to(excluded, (self.n_nodes, 2))
-            groups = [(0, 1)] if np.array_equal(excluded[:, 0], excluded[:, 1]) else [(0,), (1,)]
-            self._direct = self.linear_solver == "direct" or (
-                self.linear_solver == "auto" and np.count_nonzero(self.active) <= DIRECT_LIMIT
-            )
-            self._layout = (self.active.copy(), self._weak.copy(), excluded, groups, self._direct)
-        # below DIRECT_LIMIT, "auto" factors a small system every step (.ldl, its ordering and
-        # structure the layout's), and keeps a larger one's factors while they fit it (.reused;
-        # kept over an unchanged layout, they were made for it)
-        if not same:
-            self._edge_layouts = {}  # CG's test of singularity near the edges (.singular), per system
-        if not same or diagonal_index is None:  # the scipy path's structure is its product's, of this step
-            self._every_step = {} if not self._keeps_factors else \
-                every_step_layouts(matrix, excluded, groups, diagonal_index, self._every_step)
-        kept = KeptFactors() if not self._keeps_factors else \
-            self._kept.fresh(groups) if same else self._kept.fitting(groups, excluded, self._weak)
-        kept = KeptFactors({columns: factors for columns, factors in kept.items() if columns not in self._every_step})
-        if diagonal_index is not None and len(groups) == 1:
-            # the one system is made from the assembled matrix in place (a copy of its data was
-            # ~25 ns per point-step for cubic splines at 1e5 points); M is R with the entries the
-            # exclusion overwrote put back
-            self._correction = _exclude_in_place(matrix.indptr, matrix.indices, matrix.data, diagonal_index,
-                                                 excluded[:, 0])
-            self._systems = [_System.build(matrix, [0, 1], excluded[:, 0], self._direct and not kept and not
-                                           self._every_step, diagonal_index, in_place=True)]
-        else:
-            self._systems = [_System.build(matrix, list(columns), excluded[:, columns[0]], self._direct and columns
-                                           not in kept and columns not in self._every_step, diagonal_index)
-                             for columns in groups]
-        for system in self._systems:
-            if tuple(system.columns) in self._every_step:
-                system.factor_every_step(self._every_step[tuple(system.columns)], matrix.data)
+        if self._layout is None or not self._layout.holds(self.active, self._weak):
+            self._layout = SystemsLayout.of(self.active, self._weak, self.fixed, self.linear_solver)
+            kept = self._kept.fitting(self._layout.groups, self._layout.excluded, self._weak)
+        else:  # kept over an unchanged layout, the factors were made for it
+            kept = self._kept.fresh(self._layout.groups)
+        layout, self._direct = self._layout, self._layout.direct
+        self._systems, self._correction, kept = make_systems(matrix, diagonal_index, layout, kept, self._weak,
+                                                             self._keeps_factors)
         if self._keeps_factors:
             self._kept = kept
-            for system in self._systems:
-                system.kept = kept.get(tuple(system.columns))
-                if system.kept is None and system.every_step is None:
-                    kept.keep(system, self._weak)
 
     @property
     def _keeps_factors(self) -> bool:
@@ -362,7 +318,7 @@ class ConsistentMass(MassModel):
             solution, converged = self._solve(system, right_hand_side(), kind)
         if not converged:
             if self.fallback != "blend":
-                how = ("a pivot of its factorization is singular" if system.every_step is not None else
+                how = ("a pivot of its factorization is singular" if system.layout is not None else
                        "its block near the bodies' edges has a singular pivot" if system.singular else
                        "the direct solve left a large residual" if self._direct else "CG did not converge")
                 raise SingularMassError(
@@ -387,7 +343,7 @@ class ConsistentMass(MassModel):
             return False
         compiled = isinstance(system.matrix, _CompiledCSR) and system.matrix.upper_start is not None
         return singular_near_edges(system, self.lattice, self.active, self.layer_width,
-                                   self._edge_layouts if compiled else None)
+                                   self._layout.edges if compiled else None)
 
     def _weakest_node(self, system: "_System", rhs: np.ndarray, solution: np.ndarray) -> int | None:
         """Where a failed solve's matrix is weakest (for the stop's message): the node of the
@@ -402,7 +358,7 @@ class ConsistentMass(MassModel):
 
     def _solve(self, system: "_System", rhs: np.ndarray, kind: str) -> tuple[np.ndarray, bool]:
         if self._direct:
-            if system.every_step is not None and system.factors is None and not system.blended:
+            if system.layout is not None and system.factors is None and not system.blended:
                 if system.ldl is not None:  # this step's own L D L^T (.ldl)
                     return system.ldl.solve(rhs), True
                 return np.zeros_like(rhs), False  # a pivot said singular

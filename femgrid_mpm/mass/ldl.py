@@ -124,10 +124,11 @@ class SymbolicLDL:
         return NumericLDL(self, lower_rows, lower_data, pivots), None
 
 
-def every_step_layouts(matrix, excluded: np.ndarray, groups, diagonal_index: np.ndarray | None = None,
-                       last: dict | None = None) -> dict:
+def small_layouts(matrix, excluded: np.ndarray, groups, diagonal_index: np.ndarray | None = None,
+                  last: dict | None = None) -> dict:
     """``{columns: SymbolicLDL}`` of the systems (``groups`` of columns, ``excluded`` (n, 2))
-    that are factored every step (:attr:`SymbolicLDL.every_step`).  Without ``diagonal_index``
+    of at most :data:`EVERY_STEP_NODES` free nodes, the ones factored every step among them
+    (:attr:`SymbolicLDL.every_step`), the others when they have no kept factors.  Without ``diagonal_index``
     (the scipy engine's product, its structure its own each step) the diagonal is found, and
     ``last``'s layouts are kept where the structure and the excluded nodes are theirs."""
     if diagonal_index is None:
@@ -140,8 +141,7 @@ def every_step_layouts(matrix, excluded: np.ndarray, groups, diagonal_index: np.
         symbolic = (last or {}).get(tuple(columns))
         if symbolic is None or not symbolic.describes(matrix, excluded[:, columns[0]]):
             symbolic = SymbolicLDL.analyse(matrix.indptr, matrix.indices, diagonal_index, excluded[:, columns[0]])
-        if symbolic.every_step:
-            layouts[tuple(columns)] = symbolic
+        layouts[tuple(columns)] = symbolic
     return layouts
 
 

@@ -67,6 +67,23 @@ class ReusedFactors:
         return cls(arrays[0], arrays[1], upper_diagonal, factors.perm_r.astype(np.int64),
                    factors.perm_c.astype(np.int64), excluded.copy(), weak.copy(), tuple(columns))
 
+    @classmethod
+    def of_ldl(cls, factors, excluded: np.ndarray, weak: np.ndarray, columns) -> "ReusedFactors":
+        """The same from a compiled ``L D L^T`` (:class:`.ldl.NumericLDL`): ``U = D L^T`` and
+        one permutation both sides, the excluded nodes last with a unit pivot."""
+        order, lower_indptr = factors.symbolic.order, factors.symbolic.lower_indptr
+        n, free = len(excluded), len(order)
+        position = np.empty(n, dtype=np.int64)
+        position[order] = np.arange(free)
+        position[np.flatnonzero(excluded)] = free + np.arange(n - free)
+        indptr = np.concatenate([lower_indptr, np.full(n - free, lower_indptr[-1])])
+        lower = sp.csc_matrix((factors.lower_data, factors.lower_rows, indptr), shape=(n, n))
+        diagonal = np.concatenate([factors.pivots, np.ones(n - free)])
+        upper = sp.csc_matrix(lower.T.multiply(diagonal[:, None]))
+        arrays = [(m.indptr.astype(np.int64), m.indices.astype(np.int64), m.data.astype(float)) for m in (lower, upper)]
+        return cls(arrays[0], arrays[1], diagonal, position, position.copy(), excluded.copy(), weak.copy(),
+                   tuple(columns))
+
     def arrays(self) -> dict:
         """The factors as named arrays (a checkpoint's; :meth:`from_arrays` takes them back)."""
         names = ("indptr", "indices", "data")
@@ -130,7 +147,9 @@ class KeptFactors(dict):
     def keep(self, system, weak: np.ndarray) -> None:
         """Keep a freshly factored system's factors for the next steps (none if it is singular)."""
         columns = tuple(system.columns)
-        if system.factors is None or system.blended:
+        if system.ldl is not None and not system.blended:
+            self[columns] = ReusedFactors.of_ldl(system.ldl, system.excluded, weak, columns)
+        elif system.factors is None or system.blended:
             self.pop(columns, None)
         else:
             self[columns] = ReusedFactors.of(system.factors, system.excluded, weak, columns)

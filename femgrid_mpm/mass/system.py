@@ -36,9 +36,9 @@ class _System:
     #: "auto" below the direct limit: an earlier step's factors that precondition CG on this
     #: system (:mod:`.reused`), instead of its own ``factors``
     kept: "ReusedFactors | None" = None
-    #: "auto" on a small system: its layout's ordering and structure (:mod:`.ldl`) and this
-    #: step's factors on them (None where a pivot said singular), instead of ``factors``
-    every_step: "SymbolicLDL | None" = None
+    #: "auto" on a small system factored this step: its layout's ordering and structure
+    #: (:mod:`.ldl`) and the factors on them (None where a pivot said singular), instead of ``factors``
+    layout: "SymbolicLDL | None" = None
     ldl: "NumericLDL | None" = None
 
     def boundary_layer(self, lattice_shape: tuple, weak: np.ndarray) -> "BoundaryLayer | None":
@@ -69,10 +69,10 @@ class _System:
             inverse_diagonal = 1.0 / data[diagonal_index]
         return cls(columns, excluded, reduced, inverse_diagonal, _factor(reduced) if direct else None)
 
-    def factor_every_step(self, symbolic: "SymbolicLDL", data: np.ndarray) -> None:
+    def factor_now(self, symbolic: "SymbolicLDL", data: np.ndarray) -> None:
         """This step's ``L D L^T`` on its layout (:mod:`.ldl`) of the matrix whose entries are
         ``data`` (the assembled one: its free rows and columns are this system's)."""
-        self.every_step = symbolic
+        self.layout = symbolic
         self.ldl, self.weakest = symbolic.factor(data)
         self.singular = self.ldl is None  # its weakest node, for the stop's message
 
