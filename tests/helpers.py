@@ -2,6 +2,10 @@
 from module-level helpers as well as from tests; ``tests/conftest.py`` offers them as
 fixtures)."""
 
+import sys
+import warnings
+from pathlib import Path
+
 from femgrid_mpm import cli
 from femgrid_mpm.scene import Scene, bundled_scene
 
@@ -59,3 +63,19 @@ def run_cli(argv, capsys):
     code = cli.main([str(a) for a in argv])
     captured = capsys.readouterr()
     return code, captured.out, captured.err
+
+
+def advanced_benchmark_block(basis, linear_solver="auto", steps=6, n=100):
+    """The benchmarks' block (``benchmarks/step.py``) of about ``n`` points with consistent mass
+    and this ``linear_solver``, advanced ``steps`` steps (its warnings silenced)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from step import block_scene as benchmark_block  # noqa: E402
+    from femgrid_mpm.solver import Simulation
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        simulation = Simulation(benchmark_block(basis, "consistent", n).with_overrides(
+            **{"solver.linear_solver": linear_solver}))
+        for _ in range(steps):
+            simulation.advance()
+    return simulation

@@ -2,9 +2,6 @@
 direct limit): its solution against scipy's sparse LU of the same matrix, its pivots' test of
 singularity, which systems it takes, and a run with it against the direct solver's."""
 
-import sys
-import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,20 +10,11 @@ import scipy.sparse.linalg as spla
 
 from femgrid_mpm.mass import ldl
 from femgrid_mpm.mass.direct import _factor
-from femgrid_mpm.solver import Simulation
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from step import block_scene  # noqa: E402
+from helpers import advanced_benchmark_block
 
 
 def advanced(basis, linear_solver="auto", steps=3, n=1000):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        simulation = Simulation(block_scene(basis, "consistent", n).with_overrides(
-            **{"solver.linear_solver": linear_solver}))
-        for _ in range(steps):
-            simulation.advance()
-    return simulation
+    return advanced_benchmark_block(basis, linear_solver, steps, n)
 
 
 @pytest.mark.parametrize("basis", ["q1", "q2", "serendipity", "bspline3", "gimp", "bspline2_open"])

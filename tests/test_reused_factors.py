@@ -3,9 +3,6 @@ limit, on systems too large to factor every step): the solution against a direct
 same matrix, and the refactor triggers.  The blocks here are small enough for q1 and q2 to be
 factored every step (:mod:`femgrid_mpm.mass.ldl`), which :func:`kept_factors_only` turns off."""
 
-import sys
-import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,10 +12,8 @@ import scipy.sparse.linalg as spla
 from femgrid_mpm.mass import ldl
 from femgrid_mpm.mass.direct import _factor
 from femgrid_mpm.mass.reused import REFACTOR_ITERATIONS, ReusedFactors
-from femgrid_mpm.solver import Simulation
+from helpers import advanced_benchmark_block
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from step import block_scene  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -27,13 +22,7 @@ def kept_factors_only(monkeypatch):
 
 
 def advanced(basis, linear_solver="auto", steps=6, n=100):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        simulation = Simulation(block_scene(basis, "consistent", n).with_overrides(
-            **{"solver.linear_solver": linear_solver}))
-        for _ in range(steps):
-            simulation.advance()
-    return simulation
+    return advanced_benchmark_block(basis, linear_solver, steps, n)
 
 
 @pytest.mark.parametrize("basis", ["q1", "q2", "bspline3"])
