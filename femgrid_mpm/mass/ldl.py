@@ -23,6 +23,7 @@ matrix is then singular and the caller falls back as it does there.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,7 +98,7 @@ class SymbolicLDL:
         return (np.array_equal(excluded, self.excluded) and np.array_equal(matrix.indptr, self.structure[0])
                 and np.array_equal(matrix.indices, self.structure[1]))
 
-    @property
+    @functools.cached_property
     def every_step(self) -> bool:
         """Whether factoring this layout every step is cheaper than CG on kept factors
         (:data:`EVERY_STEP_NODES`, :data:`EVERY_STEP_WORK`)."""
