@@ -69,8 +69,15 @@ def stiffness_matrix(dNdx: sp.csr_matrix, dNdy: sp.csr_matrix, volume: np.ndarra
     return blocks[order][:, order].tocsr()
 
 
-def largest_frequency_squared(stiffness: sp.csr_matrix, mass: sp.spmatrix) -> float:
-    """Largest ``omega^2`` of ``K u = omega^2 M u`` (M symmetric positive definite)."""
+#: above this many degrees of freedom ARPACK's solves with the mass go through
+#: :class:`_ComponentSolve` (scipy's own SuperLU of the interleaved ``kron(M, I2)``, in its
+#: default order, ran cubic splines at 1e6 points out of 24 GB)
+LARGE_PROBLEM = 100_000
+
+
+def largest_frequency_squared(stiffness: sp.csr_matrix, mass: sp.spmatrix, solve=None) -> float:
+    """Largest ``omega^2`` of ``K u = omega^2 M u`` (M symmetric positive definite);
+    ``solve``, optional: ``M^-1`` as a linear operator."""
     n = stiffness.shape[0]
     if n == 0:
         return 0.0
@@ -78,8 +85,35 @@ def largest_frequency_squared(stiffness: sp.csr_matrix, mass: sp.spmatrix) -> fl
         import scipy.linalg as sla
 
         return float(sla.eigh(stiffness.toarray(), mass.toarray(), eigvals_only=True, subset_by_index=[n - 1, n - 1])[0])
-    value = spla.eigsh(stiffness, k=1, M=mass.tocsc(), which="LA", tol=1e-4, return_eigenvectors=False)
+    value = spla.eigsh(stiffness, k=1, M=mass.tocsc(), Minv=solve, which="LA", tol=1e-4, return_eigenvectors=False)
     return float(value[0])
+
+
+class _ComponentSolve(spla.LinearOperator):
+    """``kron(M, I2)[free][:, free]^-1`` by SuperLU factors of each component's block of the
+    nodal ``M`` in minimum-degree order (one when the components are free alike)."""
+
+    def __init__(self, nodal: sp.csr_matrix, free: np.ndarray):
+        free = free.reshape(-1, 2)
+        reduced = np.cumsum(free.ravel()).reshape(-1, 2) - 1  # each free dof's place in the reduced vector
+        self.parts = []
+        for c in (0, 1):
+            nodes = np.flatnonzero(free[:, c])
+            if c == 1 and np.array_equal(free[:, 0], free[:, 1]):
+                factors = self.parts[0][1]
+            else:
+                factors = spla.splu(sp.csc_matrix(nodal[nodes][:, nodes]), permc_spec="MMD_AT_PLUS_A",
+                                    options={"SymmetricMode": True})
+            self.parts.append((reduced[nodes, c], factors))
+        n = int(free.sum())
+        super().__init__(float, (n, n))
+
+    def _matvec(self, vector):
+        vector = np.asarray(vector, dtype=float).ravel()
+        out = np.empty_like(vector)
+        for places, factors in self.parts:
+            out[places] = factors.solve(vector[places])
+        return out
 
 
 def largest_eigenvalue_of_product(inverse_mass: sp.csr_matrix, stiffness: sp.csr_matrix) -> float:
@@ -171,7 +205,8 @@ def _largest_frequency_squared(inertia, point_mass: np.ndarray, free: np.ndarray
         return largest_eigenvalue_of_product(effective, stiffness)
     mass = sp.kron(inertia.matrix, sp.identity(2), format="csr")[free][:, free]
     if inertia.consistent is None:
-        return largest_frequency_squared(stiffness, mass)
+        solve = _ComponentSolve(inertia.matrix, free) if mass.shape[0] > LARGE_PROBLEM else None
+        return largest_frequency_squared(stiffness, mass, solve)
     # a mass M other than N.T diag(m) N (weak rows lumped, a mixed mass): the grid velocity is
     # projected afresh from the points, v <- M^-1 N.T m (v_p + dt N a), so the increment
     # a = M^-1 f reaches the grid as M^-1 M_C M^-1 f

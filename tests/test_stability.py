@@ -94,3 +94,35 @@ def test_serendipity_lumped_has_a_finite_step_despite_negative_masses():
     analysis with M_L^-1 says no step is stable.)"""
     simulation = Simulation(scene("vibrating_bar", "serendipity", "lumped"))
     assert 0 < simulation.critical_dt < 1.0
+
+
+def test_large_problems_solve_with_the_mass_component_by_component(monkeypatch):
+    """Above LARGE_PROBLEM degrees of freedom ARPACK's solves with ``kron(M, I2)`` go through
+    each component's factors of the nodal M (:class:`_ComponentSolve`): with x fixed on the
+    block's left part only, so that the components' free nodes differ, it inverts the reduced mass
+    to 1e-10, and the critical step is the one of scipy's own factorization within 1e-5."""
+    import scipy.sparse as sp
+
+    from femgrid_mpm import stability
+    from helpers import advanced_benchmark_block
+
+    # q2 (no weak nodes lumped: M is N.T diag(m) N) on ~1,000 nodes, above the dense problems' 1500 dofs
+    scene = advanced_benchmark_block("q2", steps=0, n=4000).scene.with_overrides(
+        supports=[{"where": "x <= 5.0", "fix": ["x"]}])
+    reference = Simulation(scene).critical_dt
+    built = []
+    original = stability._ComponentSolve
+
+    def recording(nodal, free):
+        solve = original(nodal, free)
+        built.append((solve, sp.kron(nodal, sp.identity(2), format="csr")[free][:, free]))
+        return solve
+
+    monkeypatch.setattr(stability, "LARGE_PROBLEM", 0)
+    monkeypatch.setattr(stability, "_ComponentSolve", recording)
+    simulation = Simulation(scene)
+    assert simulation.critical_dt == pytest.approx(reference, rel=1e-5)
+    (solve, mass), = built
+    assert len({id(factors) for _, factors in solve.parts}) == 2  # the components apart
+    x = np.random.default_rng(5).normal(size=mass.shape[0])
+    assert np.abs(solve @ (mass @ x) - x).max() <= 1e-10 * np.abs(x).max()
