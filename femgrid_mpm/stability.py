@@ -99,6 +99,8 @@ class _ComponentSolve(spla.LinearOperator):
         self.parts = []
         for c in (0, 1):
             nodes = np.flatnonzero(free[:, c])
+            if nodes.size == 0:  # the component held everywhere
+                continue
             if c == 1 and np.array_equal(free[:, 0], free[:, 1]):
                 factors = self.parts[0][1]
             else:
