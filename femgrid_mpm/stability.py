@@ -29,6 +29,7 @@ import scipy.sparse.linalg as spla
 
 from .bases import BASES
 from .quadrature import MassReconstruction, StressReconstruction
+from .mass.direct import symmetric_lu
 from .schemes import SCHEMES
 
 def bloch_time_step(basis: str, mass: str, spacing: float, wave_speed: float) -> float:
@@ -104,8 +105,7 @@ class _ComponentSolve(spla.LinearOperator):
             if c == 1 and np.array_equal(free[:, 0], free[:, 1]):
                 factors = self.parts[0][1]
             else:
-                factors = spla.splu(sp.csc_matrix(nodal[nodes][:, nodes]), permc_spec="MMD_AT_PLUS_A",
-                                    options={"SymmetricMode": True})
+                factors = symmetric_lu(nodal[nodes][:, nodes])
             self.parts.append((reduced[nodes, c], factors))
         n = int(free.sum())
         super().__init__(float, (n, n))

@@ -21,6 +21,12 @@ def _rows_and_block(matrix: sp.csr_matrix, nodes: np.ndarray) -> tuple[sp.csr_ma
     return rows, rows[:, nodes]
 
 
+def symmetric_lu(matrix: sp.spmatrix):
+    """SuperLU's factors of a symmetric matrix in minimum-degree order on ``A + A^T``, with
+    diagonal pivots preferred (raises RuntimeError if it is exactly singular)."""
+    return spla.splu(sp.csc_matrix(matrix), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+
+
 def _pivots(matrix: sp.csr_matrix):
     """SuperLU factors of a symmetric matrix and each pivot against its own diagonal
     entry with that pivot's node, ``(factors, ratios, nodes)``; None if SuperLU finds
@@ -41,7 +47,7 @@ def _pivots(matrix: sp.csr_matrix):
     compact = sp.csc_matrix(matrix)  # a copy: the pattern's index arrays stay as they are
     compact.eliminate_zeros()
     try:
-        factors = spla.splu(compact, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+        factors = symmetric_lu(compact)
     except RuntimeError:  # "Factor is exactly singular"
         return None
     nodes = np.empty_like(factors.perm_c)

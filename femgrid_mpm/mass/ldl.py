@@ -28,11 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ..kernels.arithmetic import fused
 from ..kernels.compiled import compiled
-from .direct import PIVOT_RATIO
+from .direct import PIVOT_RATIO, symmetric_lu
 
 #: a layout is factored every step when it has at most this many free nodes (a larger one
 #: fills more than it pays: q1 at 2601 free nodes measured 1.6 ms a factorization against
@@ -80,7 +79,7 @@ class SymbolicLDL:
         # the ordering of a diagonally dominant matrix of this structure (the values do not enter it)
         degree = np.asarray(structure.sum(axis=0)).ravel()
         surrogate = (sp.diags(2.0 * degree + 1.0) - structure).tocsc()
-        ordering = spla.splu(surrogate, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True}).perm_c
+        ordering = symmetric_lu(surrogate).perm_c
         order = np.empty(len(free), dtype=np.int64)
         order[ordering] = free  # SuperLU's perm_c[i]: where compact column i is eliminated
         position = np.full(len(excluded), -1, dtype=np.int64)

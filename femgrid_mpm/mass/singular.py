@@ -39,10 +39,11 @@ def singular_near_edges(system, lattice: np.ndarray, active: np.ndarray, layer_w
     """
     if system.singular is None:
         system.singular, system.weakest = False, None
+        columns = tuple(system.columns)
+        if layouts is None or columns not in layouts:
+            layer = _near_empty_nodes(lattice, ~active, layer_width) & ~system.excluded
         if layouts is not None:
-            columns = tuple(system.columns)
             if columns not in layouts:
-                layer = _near_empty_nodes(lattice, ~active, layer_width) & ~system.excluded
                 matrix = system.matrix
                 layouts[columns] = None if not layer.any() else SymbolicLDL.analyse(
                     matrix.indptr, matrix.indices, matrix.upper_start, ~layer)
@@ -50,7 +51,6 @@ def singular_near_edges(system, lattice: np.ndarray, active: np.ndarray, layer_w
                 factors, weakest = layouts[columns].factor(system.matrix.data)
                 system.singular, system.weakest = factors is None, weakest
             return system.singular
-        layer = _near_empty_nodes(lattice, ~active, layer_width) & ~system.excluded
         nodes = np.flatnonzero(layer)
         if nodes.size:
             pivots = _pivots(_rows_and_block(system.matrix, nodes)[1])
