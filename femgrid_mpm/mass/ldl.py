@@ -63,6 +63,13 @@ class SymbolicLDL:
     parent: np.ndarray
     lower_indptr: np.ndarray
     structure: tuple  # (indptr, indices) analysed
+    #: row ``k`` of ``L``: its columns ``row_columns[row_indptr[k]:row_indptr[k+1]]`` in the
+    #: order the numeric pass takes them, each entry's place in the columns of ``L``
+    #: (``row_slots``), and the rows of those columns (``lower_rows``): the same every step
+    row_indptr: np.ndarray
+    row_columns: np.ndarray
+    row_slots: np.ndarray
+    lower_rows: np.ndarray
 
     @classmethod
     def analyse(cls, indptr: np.ndarray, indices: np.ndarray, diagonal_index: np.ndarray,
@@ -89,8 +96,10 @@ class SymbolicLDL:
         parent, counts = _elimination_tree(upper_indptr, upper_rows)
         lower_indptr = np.zeros(len(order) + 1, dtype=np.int64)
         np.cumsum(counts, out=lower_indptr[1:])
+        row_indptr, row_columns, row_slots, lower_rows = _row_patterns(upper_indptr, upper_rows, parent, lower_indptr)
         return cls(excluded.copy(), order, upper_indptr, upper_rows, source,
-                   diagonal_index[order].astype(np.int64), parent, lower_indptr, (indptr.copy(), indices.copy()))
+                   diagonal_index[order].astype(np.int64), parent, lower_indptr, (indptr.copy(), indices.copy()),
+                   row_indptr, row_columns, row_slots, lower_rows)
 
     def describes(self, matrix, excluded: np.ndarray) -> bool:
         """Whether this layout is that of ``matrix``'s structure with these excluded nodes."""
@@ -114,14 +123,14 @@ class SymbolicLDL:
         """``(L D L^T, None)`` of the matrix whose entries are ``data`` (this layout's
         structure), or ``(None, node)`` if it is singular: the node of the first pivot below
         :data:`PIVOT_RATIO` of its diagonal entry."""
-        lower_rows = np.empty(self.factor_entries, dtype=np.int64)
         lower_data = np.empty(self.factor_entries)
         pivots = np.empty(len(self.order))
         weakest = _numeric(data, self.upper_indptr, self.upper_rows, self.source, self.diagonal_source,
-                           self.parent, self.lower_indptr, lower_rows, lower_data, pivots, PIVOT_RATIO)
+                           self.row_indptr, self.row_columns, self.row_slots, self.lower_indptr, self.lower_rows,
+                           lower_data, pivots, PIVOT_RATIO)
         if weakest >= 0:
             return None, int(self.order[weakest])
-        return NumericLDL(self, lower_rows, lower_data, pivots), None
+        return NumericLDL(self, self.lower_rows, lower_data, pivots), None
 
 
 def small_layouts(matrix, excluded: np.ndarray, groups, diagonal_index: np.ndarray | None = None,
@@ -224,14 +233,18 @@ def _elimination_tree(upper_indptr, upper_rows):
 
 
 @compiled()
-def _numeric(data, upper_indptr, upper_rows, source, diagonal_source, parent, lower_indptr, lower_rows,
-             lower_data, pivots, pivot_ratio):
-    """The numeric ``L D L^T``, row by row: returns -1, or the position of the first
-    pivot below ``pivot_ratio`` of its diagonal entry (or not finite)."""
+def _row_patterns(upper_indptr, upper_rows, parent, lower_indptr):
+    """Each row of ``L``'s columns, in the tree's order (the reach of the row's upper
+    entries: each entry's path up the tree to the row, the paths stacked from the last
+    entry's down), with each entry's place in its column and the rows of each column."""
     n = len(upper_indptr) - 1
-    y = np.zeros(n)  # row k of L D, scattered
+    entries = lower_indptr[n]
+    row_indptr = np.zeros(n + 1, dtype=np.int64)
+    row_columns = np.empty(entries, dtype=np.int64)
+    row_slots = np.empty(entries, dtype=np.int64)
+    lower_rows = np.empty(entries, dtype=np.int64)
+    filled = np.zeros(n, dtype=np.int64)  # entries of each column of L placed so far
     mark = np.full(n, -1, dtype=np.int64)
-    filled = np.zeros(n, dtype=np.int64)  # entries of each column of L made so far
     reach = np.empty(n, dtype=np.int64)
     path = np.empty(n, dtype=np.int64)
     for k in range(n):
@@ -239,9 +252,8 @@ def _numeric(data, upper_indptr, upper_rows, source, diagonal_source, parent, lo
         top = n
         for entry in range(upper_indptr[k], upper_indptr[k + 1]):
             i = upper_rows[entry]
-            y[i] += data[source[entry]]
             length = 0
-            while mark[i] != k:  # the columns this entry reaches, in the tree's order
+            while mark[i] != k:
                 path[length] = i
                 length += 1
                 mark[i] = k
@@ -250,21 +262,41 @@ def _numeric(data, upper_indptr, upper_rows, source, diagonal_source, parent, lo
                 top -= 1
                 length -= 1
                 reach[top] = path[length]
-        diagonal = data[diagonal_source[k]]
-        d = diagonal
+        start = row_indptr[k]
         for slot in range(top, n):
             i = reach[slot]
+            place = lower_indptr[i] + filled[i]
+            filled[i] += 1
+            row_columns[start + slot - top] = i
+            row_slots[start + slot - top] = place
+            lower_rows[place] = k
+        row_indptr[k + 1] = start + n - top
+    return row_indptr, row_columns, row_slots, lower_rows
+
+
+@compiled()
+def _numeric(data, upper_indptr, upper_rows, source, diagonal_source, row_indptr, row_columns, row_slots,
+             lower_indptr, lower_rows, lower_data, pivots, pivot_ratio):
+    """The numeric ``L D L^T``, row by row on the rows' kept patterns (:func:`_row_patterns`):
+    returns -1, or the position of the first pivot below ``pivot_ratio`` of its diagonal
+    entry (or not finite)."""
+    n = len(upper_indptr) - 1
+    y = np.zeros(n)  # row k of L D, scattered
+    for k in range(n):
+        for entry in range(upper_indptr[k], upper_indptr[k + 1]):
+            y[upper_rows[entry]] += data[source[entry]]
+        diagonal = data[diagonal_source[k]]
+        d = diagonal
+        for s in range(row_indptr[k], row_indptr[k + 1]):
+            i = row_columns[s]
             yi = y[i]
             y[i] = 0.0
-            start = lower_indptr[i]
-            end = start + filled[i]
-            for p in range(start, end):
+            end = row_slots[s]  # column i's entries above row k precede it
+            for p in range(lower_indptr[i], end):
                 y[lower_rows[p]] = fused(-lower_data[p], yi, y[lower_rows[p]])
             factor = yi / pivots[i]
             d = fused(-factor, yi, d)
-            lower_rows[end] = k
             lower_data[end] = factor
-            filled[i] += 1
         if not d >= pivot_ratio * diagonal:  # NaN too
             return k
         pivots[k] = d
@@ -273,22 +305,26 @@ def _numeric(data, upper_indptr, upper_rows, source, diagonal_source, parent, lo
 
 @compiled()
 def _solve(rhs, out, order, lower_indptr, lower_rows, lower_data, pivots):
-    """``out[order] = L^-T D^-1 L^-1 rhs[order]``, column by column of rhs."""
-    n = len(order)
-    x = np.empty(n)
-    for c in range(rhs.shape[1]):
-        for j in range(n):
-            x[j] = rhs[order[j], c]
-        for j in range(n):  # L, unit diagonal, by columns
-            xj = x[j]
-            for p in range(lower_indptr[j], lower_indptr[j + 1]):
-                x[lower_rows[p]] = fused(-lower_data[p], xj, x[lower_rows[p]])
-        for j in range(n):
-            x[j] = x[j] / pivots[j]
-        for j in range(n - 1, -1, -1):  # L^T
-            xj = x[j]
-            for p in range(lower_indptr[j], lower_indptr[j + 1]):
-                xj = fused(-lower_data[p], x[lower_rows[p]], xj)
-            x[j] = xj
-        for j in range(n):
-            out[order[j], c] = x[j]
+    """``out[order] = L^-T D^-1 L^-1 rhs[order]``, the columns of rhs in the same sweeps
+    (each entry of ``L`` read once for all of them)."""
+    n, m = len(order), rhs.shape[1]
+    x = np.empty((n, m))
+    for j in range(n):
+        for c in range(m):
+            x[j, c] = rhs[order[j], c]
+    for j in range(n):  # L, unit diagonal, by columns
+        for p in range(lower_indptr[j], lower_indptr[j + 1]):
+            r, value = lower_rows[p], lower_data[p]
+            for c in range(m):
+                x[r, c] = fused(-value, x[j, c], x[r, c])
+    for j in range(n):
+        for c in range(m):
+            x[j, c] = x[j, c] / pivots[j]
+    for j in range(n - 1, -1, -1):  # L^T
+        for p in range(lower_indptr[j], lower_indptr[j + 1]):
+            r, value = lower_rows[p], lower_data[p]
+            for c in range(m):
+                x[j, c] = fused(-value, x[r, c], x[j, c])
+    for j in range(n):
+        for c in range(m):
+            out[order[j], c] = x[j, c]
