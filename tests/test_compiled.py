@@ -137,3 +137,44 @@ def test_code_outside_the_library_is_keyed_by_the_library_too(tmp_path, monkeypa
     assert cache_key(library) == fingerprint(library)
     (library / "helpers.py").write_text("import numba  # edited\n")
     assert cache_key(package) != first
+
+
+def _save_many(directory: str, worker: int, count: int, locked: bool) -> None:
+    """One process' saves of ``count`` entries of its own into one kernel's cache files."""
+    from numba.core.caching import IndexDataCacheFile
+
+    cache_file = IndexDataCacheFile(cache_path=directory, filename_base="kernel", source_stamp=("stamp", 1))
+    for entry in range(count):
+        key, data = (f"signature {worker} {entry}",), ("machine code of", worker, entry)
+        if locked:
+            compiled_module.locked_save(cache_file, Path(directory) / compiled_module.LOCK, key, data)
+        else:
+            cache_file.save(key, data)
+
+
+def test_processes_that_compile_into_one_cache_at_once_keep_every_entry_as_its_own(tmp_path):
+    """Four processes save 30 specialisations each of one kernel at once (a sweep's workers
+    on a cold cache): every key loads the data saved under it (numba's unlocked save, run
+    the same way here, lost entries or swapped their data in most runs)."""
+    import multiprocessing
+    from numba.core.caching import IndexDataCacheFile
+
+    workers, count = 4, 30
+    context = multiprocessing.get_context("spawn")
+    processes = [context.Process(target=_save_many, args=(str(tmp_path), w, count, True)) for w in range(workers)]
+    for process in processes:
+        process.start()
+    for process in processes:
+        process.join(60)
+        assert process.exitcode == 0
+    cache_file = IndexDataCacheFile(cache_path=str(tmp_path), filename_base="kernel", source_stamp=("stamp", 1))
+    loaded = {(w, e): cache_file.load((f"signature {w} {e}",)) for w in range(workers) for e in range(count)}
+    assert loaded == {(w, e): ("machine code of", w, e) for w in range(workers) for e in range(count)}
+
+
+def test_the_library_kernels_save_under_the_lock():
+    from femgrid_mpm.kernels import g2p
+
+    save = g2p.density_factor._cache._cache_file.save
+    assert save.func is compiled_module.locked_save
+    assert save.args[1].name == compiled_module.LOCK

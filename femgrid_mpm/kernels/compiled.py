@@ -31,8 +31,10 @@ line), when the tree's cache holds no kernel yet.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
+import itertools
 import logging
 import os
 import shutil
@@ -43,6 +45,12 @@ import warnings
 from pathlib import Path
 
 import numba
+from numba.core.caching import IndexDataCacheFile
+
+try:
+    import fcntl
+except ImportError:  # Windows: numba's own save, unlocked
+    fcntl = None
 
 #: fingerprint directories kept beside the current one (older trees, other runs)
 KEPT = 4
@@ -200,7 +208,52 @@ def compiled(**options):
         previous = numba.config.CACHE_DIR
         numba.config.CACHE_DIR = str(directory)
         try:
-            return numba.njit(cache=True, **options)(function)
+            kernel = numba.njit(cache=True, **options)(function)
         finally:
             numba.config.CACHE_DIR = previous
+        if isinstance(kernel._cache._cache_file, IndexDataCacheFile):
+            kernel._cache._cache_file.save = functools.partial(locked_save, kernel._cache._cache_file,
+                                                               directory / LOCK)
+        return kernel
     return decorate
+
+
+#: the file whose lock makes one cache entry's writes (index and data) one step for all processes
+LOCK = ".lock"
+
+
+@contextlib.contextmanager
+def _exclusive(path: Path):
+    """An exclusive lock on ``path`` between processes (none where ``fcntl`` is missing)."""
+    if fcntl is None:
+        yield
+        return
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def locked_save(cache_file: IndexDataCacheFile, lock: Path, key, data) -> None:
+    """numba's ``IndexDataCacheFile.save`` made safe for processes that compile into one
+    directory at once (a sweep's workers on a cold cache, :func:`.warm.warm_in_parallel`).
+
+    numba reads the kernel's index, picks the first free data file's name, writes the
+    index and then the data.  Two processes that save two specialisations of one kernel
+    at once read the same index and pick the same name: one index entry is lost, and the
+    data file may end up holding the other specialisation's machine code under this one's
+    key, which a later process loads and runs on arguments of the wrong types.  Here the
+    whole save holds an exclusive lock on the directory's :data:`LOCK`, and the data is
+    written before the index that names it, so a process that loads (unlocked) finds either
+    no entry or a complete one."""
+    with _exclusive(lock):
+        overloads = cache_file._load_index()
+        name = overloads.get(key)
+        if name is None:
+            taken = set(overloads.values())
+            name = next(n for n in map(cache_file._data_name, itertools.count(1)) if n not in taken)
+        cache_file._save_data(name, data)
+        overloads[key] = name
+        cache_file._save_index(overloads)
