@@ -43,8 +43,9 @@ def reproduce(args) -> int:
     bar, follow = runs_bar(sum(PLANNED_RUNS[name]() for name in chosen), sys.stderr.isatty())
     finished: list[str] = []
     try:
-        if note_compilation():  # a cold cache: the runs' kernels compiled on every core first
-            warm_in_parallel([scene for name in chosen for scene in WARM_SCENES[name]()])
+        if note_compilation():  # a cold cache: the kernels of this process' runs compiled on every core first
+            # (the sweeps' runs are on Dask's workers, which compile theirs in parallel already)
+            warm_in_parallel([scene for name in chosen if PLANNED_RUNS[name]() for scene in WARM_SCENES[name]()])
         with following(follow) if follow else contextlib.nullcontext():
             for name in chosen:
                 if bar is None:

@@ -80,17 +80,13 @@ def kernel_key(scene: Scene) -> str:
     return json.dumps(settings, sort_keys=True)
 
 
-def shares(scenes: list[Scene], processes: int) -> list[list[Scene]]:
-    """One scene per :func:`kernel_key`, dealt out to ``processes`` shares by basis (a
-    basis' transfer kernels are compiled in one process only), the largest groups first
-    to the share with the fewest scenes."""
+def shares(scenes: list[Scene]) -> list[list[Scene]]:
+    """One scene per :func:`kernel_key`, in one share per basis (a basis' transfer kernels
+    are compiled in one process only), the largest shares first."""
     groups: dict[str, dict[str, Scene]] = {}
     for scene in scenes:
         groups.setdefault(scene.grid.basis, {}).setdefault(kernel_key(scene), scene)
-    dealt: list[list[Scene]] = [[] for _ in range(max(1, processes))]
-    for group in sorted(groups.values(), key=len, reverse=True):
-        min(dealt, key=len).extend(group.values())
-    return [share for share in dealt if share]
+    return sorted((list(group.values()) for group in groups.values()), key=len, reverse=True)
 
 
 def _warm_share(share: list[Scene]) -> None:
@@ -102,14 +98,16 @@ def _warm_share(share: list[Scene]) -> None:
 
 def warm_in_parallel(scenes: list[Scene], processes: int | None = None) -> int:
     """Compile the kernels of the runs of ``scenes`` in ``processes`` processes at once (default:
-    the cores), each warming up its :func:`shares` of them into the kernel cache, which
-    :func:`femgrid_mpm.kernels.compiled.locked_save` keeps consistent under concurrent
-    writes; returns the number of processes (1: nothing done, the runs compile as they go)."""
-    dealt = shares(scenes, processes or os.cpu_count() or 1)
-    if len(dealt) < 2:
+    the cores), each taking the next of the :func:`shares` when it has warmed up the last
+    into the kernel cache, which :func:`femgrid_mpm.kernels.compiled.locked_save` keeps
+    consistent under concurrent writes; returns the number of processes (1: nothing
+    done, the runs compile as they go)."""
+    dealt = shares(scenes)
+    processes = min(processes or os.cpu_count() or 1, len(dealt))
+    if processes < 2:
         return 1
     # spawn: a fork of this process would copy its threads' state (numba's, Dask's)
-    with ProcessPoolExecutor(len(dealt), mp_context=multiprocessing.get_context("spawn")) as pool:
-        for _ in pool.map(_warm_share, dealt):
+    with ProcessPoolExecutor(processes, mp_context=multiprocessing.get_context("spawn")) as pool:
+        for _ in pool.map(_warm_share, dealt):  # one share at a time to whichever process is free
             pass
-    return len(dealt)
+    return processes
