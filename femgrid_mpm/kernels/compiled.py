@@ -24,6 +24,10 @@ package's ``__pycache__`` directories.  Where no directory is writable,
 kernels are compiled in every process, with one warning: loading from a cache
 that cannot be keyed would bring back the stale kernels.
 
+Processes that compile into one directory at once (a sweep's workers) save each
+kernel under a lock (:func:`locked_save`): numba's own save lets them lose or swap
+each other's entries.
+
 A first use compiles for about a minute: :func:`note_compilation` says so
 once, on the ``femgrid_mpm`` logger (INFO, which the command line shows as one
 line), when the tree's cache holds no kernel yet.
@@ -224,21 +228,28 @@ LOCK = ".lock"
 
 @contextlib.contextmanager
 def _exclusive(path: Path):
-    """An exclusive lock on ``path`` between processes (none where ``fcntl`` is missing)."""
-    if fcntl is None:
-        yield
-        return
-    with open(path, "a") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
+    """An exclusive lock on ``path`` between processes; none where ``fcntl`` is missing or the
+    file system refuses it (some network file systems): numba's own save then, unlocked."""
+    handle = None
+    if fcntl is not None:
         try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
+            handle = open(path, "a")
+            fcntl.flock(handle, fcntl.LOCK_EX)
+        except OSError:
+            if handle is not None:
+                handle.close()
+            handle = None
+    try:
+        yield
+    finally:
+        if handle is not None:
+            handle.close()  # closing releases the lock
 
 
 def locked_save(cache_file: IndexDataCacheFile, lock: Path, key, data) -> None:
     """numba's ``IndexDataCacheFile.save`` made safe for processes that compile into one
-    directory at once (a sweep's workers on a cold cache, :func:`.warm.warm_in_parallel`).
+    directory at once (a sweep's Dask workers on a cold cache,
+    :func:`femgrid_mpm.reproduce.timing.warm_in_parallel`).
 
     numba reads the kernel's index, picks the first free data file's name, writes the
     index and then the data.  Two processes that save two specialisations of one kernel

@@ -283,7 +283,10 @@ class ConsistentMass(MassModel):
         for system in self._systems:
             if system.ldl is not None and coupling is None and (self._mix_excess is None or not moving):
                 # this step's exact factors, which read the free rows only and are zero elsewhere
-                solution[:, system.columns] = system.ldl.solve(rhs[:, system.columns])
+                if len(system.columns) == rhs.shape[1]:  # the one system (no copies of the columns)
+                    solution = system.ldl.solve(rhs)
+                else:
+                    solution[:, system.columns] = system.ldl.solve(rhs[:, system.columns])
                 continue
             part = np.where(system.excluded[:, None], 0.0, rhs[:, system.columns])
             coupled = None if coupling is None else np.where(system.excluded[:, None], 0.0, coupling[:, system.columns])

@@ -305,26 +305,52 @@ def _numeric(data, upper_indptr, upper_rows, source, diagonal_source, row_indptr
 
 @compiled()
 def _solve(rhs, out, order, lower_indptr, lower_rows, lower_data, pivots):
-    """``out[order] = L^-T D^-1 L^-1 rhs[order]``, the columns of rhs in the same sweeps
-    (each entry of ``L`` read once for all of them)."""
-    n, m = len(order), rhs.shape[1]
-    x = np.empty((n, m))
-    for j in range(n):
-        for c in range(m):
-            x[j, c] = rhs[order[j], c]
-    for j in range(n):  # L, unit diagonal, by columns
-        for p in range(lower_indptr[j], lower_indptr[j + 1]):
-            r, value = lower_rows[p], lower_data[p]
-            for c in range(m):
-                x[r, c] = fused(-value, x[j, c], x[r, c])
-    for j in range(n):
-        for c in range(m):
-            x[j, c] = x[j, c] / pivots[j]
-    for j in range(n - 1, -1, -1):  # L^T
-        for p in range(lower_indptr[j], lower_indptr[j + 1]):
-            r, value = lower_rows[p], lower_data[p]
-            for c in range(m):
-                x[j, c] = fused(-value, x[r, c], x[j, c])
-    for j in range(n):
-        for c in range(m):
-            out[order[j], c] = x[j, c]
+    """``out[order] = L^-T D^-1 L^-1 rhs[order]``; two columns of rhs (both velocity
+    components) in the same sweeps, each entry of ``L`` read once for both."""
+    n = len(order)
+    if rhs.shape[1] == 2:
+        a = np.empty(n)
+        b = np.empty(n)
+        for j in range(n):
+            a[j] = rhs[order[j], 0]
+            b[j] = rhs[order[j], 1]
+        for j in range(n):  # L, unit diagonal, by columns
+            aj = a[j]
+            bj = b[j]
+            for p in range(lower_indptr[j], lower_indptr[j + 1]):
+                r, value = lower_rows[p], lower_data[p]
+                a[r] = fused(-value, aj, a[r])
+                b[r] = fused(-value, bj, b[r])
+        for j in range(n):
+            a[j] = a[j] / pivots[j]
+            b[j] = b[j] / pivots[j]
+        for j in range(n - 1, -1, -1):  # L^T
+            aj = a[j]
+            bj = b[j]
+            for p in range(lower_indptr[j], lower_indptr[j + 1]):
+                r, value = lower_rows[p], lower_data[p]
+                aj = fused(-value, a[r], aj)
+                bj = fused(-value, b[r], bj)
+            a[j] = aj
+            b[j] = bj
+        for j in range(n):
+            out[order[j], 0] = a[j]
+            out[order[j], 1] = b[j]
+        return
+    x = np.empty(n)
+    for c in range(rhs.shape[1]):
+        for j in range(n):
+            x[j] = rhs[order[j], c]
+        for j in range(n):
+            xj = x[j]
+            for p in range(lower_indptr[j], lower_indptr[j + 1]):
+                x[lower_rows[p]] = fused(-lower_data[p], xj, x[lower_rows[p]])
+        for j in range(n):
+            x[j] = x[j] / pivots[j]
+        for j in range(n - 1, -1, -1):
+            xj = x[j]
+            for p in range(lower_indptr[j], lower_indptr[j + 1]):
+                xj = fused(-lower_data[p], x[lower_rows[p]], xj)
+            x[j] = xj
+        for j in range(n):
+            out[order[j], c] = x[j]
