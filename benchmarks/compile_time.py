@@ -20,11 +20,6 @@ load on a shared machine disturbs least).  The workloads:
   defaults (the vibrating bar, cantilever and box impact cases, and every run
   of the cost-accuracy sweeps, which reproduce runs on Dask workers), each cut
   to three steps: the kernels its first run compiles, in one process.
-* ``reproduce_parallel``: the same after what ``femgrid-mpm reproduce`` does first
-  on a cold cache, the warm-ups of all its runs shared out to a process per core
-  (:func:`femgrid_mpm.reproduce.timing.warm_in_parallel`); its kernels compiled
-  are those that the warm-ups left to this process, and its compile wall is the
-  first run's wait on a cold cache.
 
 ``--kernels`` lists, per workload, every compilation numba reports (its
 ``numba:compile`` events, :mod:`numba.core.event`) with its CPU seconds: each
@@ -42,7 +37,7 @@ import subprocess
 import sys
 import tempfile
 
-WORKLOADS = ("q1_lumped", "bspline3_consistent", "reproduce", "reproduce_parallel")
+WORKLOADS = ("q1_lumped", "bspline3_consistent", "reproduce")
 
 #: what a workload's process runs: the workload, then its timings and compilations as JSON
 CHILD = r"""
@@ -147,17 +142,6 @@ def workload_reproduce() -> None:
             timing.warm_kernels(scene)
             with contextlib.suppress(Exception):
                 Simulation(scene).run()
-
-
-def workload_reproduce_parallel() -> None:
-    """:func:`workload_reproduce` after the cold cache's warm-ups on every core."""
-    from femgrid_mpm.kernels.compiled import LIBRARY, cache_directory, cache_is_cold
-    from femgrid_mpm.reproduce import WARM_SCENES
-    from femgrid_mpm.reproduce.timing import warm_in_parallel
-
-    if cache_is_cold(cache_directory(LIBRARY)):
-        warm_in_parallel([scene for scenes in WARM_SCENES.values() for scene in scenes()])
-    workload_reproduce()
 
 
 def measure(workload: str) -> dict:

@@ -1,16 +1,11 @@
 """First use and ``reproduce``: the note that kernels are compiling, the progress over the
 runs, and wall times taken with the kernels loaded."""
 
-import os
-import subprocess
-import sys
-import textwrap
-
 import pytest
 
 from femgrid_mpm.cli.progress import runs_bar
 from femgrid_mpm.kernels import compiled
-from femgrid_mpm.reproduce import PLANNED_RUNS, WARM_SCENES, box_impact, cantilever
+from femgrid_mpm.reproduce import PLANNED_RUNS, box_impact, cantilever
 from femgrid_mpm.reproduce import timing
 from femgrid_mpm.scene import bundled_scene
 
@@ -80,10 +75,7 @@ def test_each_case_run_is_counted_and_warmed_first(tmp_path, monkeypatch):
 
     def spy(scene):
         warmed.append((scene.grid.basis, scene.contact.kind))
-        scenes.append(scene)
         original(scene)
-
-    scenes = []
 
     monkeypatch.setattr(timing, "warm_kernels", spy)
     with timing.following(labels.append):
@@ -91,8 +83,6 @@ def test_each_case_run_is_counted_and_warmed_first(tmp_path, monkeypatch):
     assert len(labels) == box_impact.planned_runs(("shared",)) == len(box_impact.BASES)
     assert warmed == [(basis, "shared") for basis in box_impact.BASES]
     assert labels[0] == f"box impact, {box_impact.BASES[0]} shared"
-    # the scenes a cold cache compiles in parallel beforehand are these
-    assert [s.model_dump() for s in box_impact.warm_scenes(("shared",))] == [s.model_dump() for s in scenes]
 
 
 def test_the_planned_runs_of_every_case():
@@ -118,65 +108,3 @@ def test_the_warm_up_takes_one_tiny_step(monkeypatch):
     monkeypatch.setattr(timing.Simulation, "run", counting)
     timing.warm_kernels(bundled_scene("vibrating_bar"))
     assert steps == [(1, timing.WARM_STEP)]
-
-
-def test_every_case_lists_the_scenes_it_runs():
-    """As many warm-up scenes as simulations (the sweeps' planned runs for cost_accuracy)."""
-    from femgrid_mpm.reproduce.cost_accuracy import SWEEPS
-    from femgrid_mpm.sweep import plan, read_sweep
-    from femgrid_mpm.sweep.spec import BUNDLED_SWEEPS
-
-    assert set(WARM_SCENES) == set(PLANNED_RUNS)
-    for name in ("vibrating_bar", "cantilever", "box_impact"):
-        assert len(WARM_SCENES[name]()) == PLANNED_RUNS[name]()
-    planned = sum(len(plan(read_sweep(BUNDLED_SWEEPS / f"{n}.toml"), BUNDLED_SWEEPS / f"{n}.toml")) for n in SWEEPS)
-    assert len(WARM_SCENES["cost_accuracy"]()) == planned
-    assert {(s.grid.basis, s.solver.mass) for s in WARM_SCENES["vibrating_bar"]()} >= {("q1", "lumped"),
-                                                                                     ("bspline3", "consistent")}
-
-
-def test_one_warm_up_per_kernel_key_and_each_basis_in_one_process():
-    bar = bundled_scene("vibrating_bar")
-    scenes = [bar.with_overrides(**{"grid.basis": basis, "solver.mass": mass, "grid.spacing": spacing,
-                                    "time.end": end})
-              for basis in ("q1", "q2", "bspline3") for mass in ("lumped", "consistent")
-              for spacing in (0.5, 0.25) for end in (1.0, 2.0)]
-    assert timing.kernel_key(scenes[0]) == timing.kernel_key(scenes[3])  # spacing and end time apart
-    assert timing.kernel_key(scenes[0]) != timing.kernel_key(scenes[4])  # the mass
-    dealt = timing.shares(scenes)
-    assert [[(s.grid.basis, s.solver.mass, s.grid.spacing, s.time.end) for s in share] for share in dealt] == \
-        [[(b, m, 0.5, 1.0) for m in ("lumped", "consistent")] for b in ("q1", "q2", "bspline3")]
-    assert timing.warm_in_parallel(scenes[:1], 2) == 1  # one basis: nothing to share
-
-
-def test_kernels_compiled_in_parallel_load_in_a_fresh_process(tmp_path):
-    """Two processes compile two bases' kernels into one empty cache at once (their shared
-    helpers both); a fresh process then runs both scenes without compiling anything."""
-    scenes = ("from femgrid_mpm.scene import bundled_scene\n"
-              "scenes = [bundled_scene('vibrating_bar').with_overrides(**{'grid.basis': b}) for b in ('q1', 'q2')]\n")
-    warm = scenes + textwrap.dedent("""
-        from femgrid_mpm.reproduce.timing import warm_in_parallel
-        if __name__ == "__main__":
-            print(warm_in_parallel(scenes, 2))
-        """)
-    load = scenes + textwrap.dedent("""
-        from numba.core import event
-        from femgrid_mpm.reproduce.timing import warm_kernels
-        compiled = []
-        class Listener(event.Listener):
-            def on_start(self, ev):
-                compiled.append(ev.data["dispatcher"].py_func.__qualname__)
-            def on_end(self, ev):
-                pass
-        event.register("numba:compile", Listener())
-        for scene in scenes:
-            warm_kernels(scene)
-        print(len(compiled), compiled)
-        """)
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    for name, program in (("warm.py", warm), ("load.py", load)):
-        (tmp_path / name).write_text(program)
-    first = subprocess.run([sys.executable, str(tmp_path / "warm.py")], env=env, capture_output=True, text=True)
-    assert first.returncode == 0 and first.stdout.split() == ["2"], first.stderr[-2000:]
-    second = subprocess.run([sys.executable, str(tmp_path / "load.py")], env=env, capture_output=True, text=True)
-    assert second.returncode == 0 and second.stdout.startswith("0 []"), second.stdout + second.stderr[-2000:]

@@ -14,9 +14,8 @@ from .signals import HANDLED, Interrupted
 def reproduce(args) -> int:
     """Run the paper's cases (:data:`femgrid_mpm.reproduce.CASES`) into ``--out``."""
     from ..output import probe_writable
-    from ..kernels.compiled import note_compilation
-    from ..reproduce import CASES, PLANNED_RUNS, WARM_SCENES
-    from ..reproduce.timing import following, warm_in_parallel
+    from ..reproduce import CASES, PLANNED_RUNS
+    from ..reproduce.timing import following
 
     if args.list:
         for name in CASES:
@@ -43,9 +42,6 @@ def reproduce(args) -> int:
     bar, follow = runs_bar(sum(PLANNED_RUNS[name]() for name in chosen), sys.stderr.isatty())
     finished: list[str] = []
     try:
-        if note_compilation():  # a cold cache: the kernels of this process' runs compiled on every core first
-            # (the sweeps' runs are on Dask's workers, which compile theirs in parallel already)
-            warm_in_parallel([scene for name in chosen if PLANNED_RUNS[name]() for scene in WARM_SCENES[name]()])
         with following(follow) if follow else contextlib.nullcontext():
             for name in chosen:
                 if bar is None:

@@ -248,8 +248,7 @@ def _exclusive(path: Path):
 
 def locked_save(cache_file: IndexDataCacheFile, lock: Path, key, data) -> None:
     """numba's ``IndexDataCacheFile.save`` made safe for processes that compile into one
-    directory at once (a sweep's Dask workers on a cold cache,
-    :func:`femgrid_mpm.reproduce.timing.warm_in_parallel`).
+    directory at once (a sweep's Dask workers on a cold cache).
 
     numba reads the kernel's index, picks the first free data file's name, writes the
     index and then the data.  Two processes that save two specialisations of one kernel

@@ -275,8 +275,7 @@ class ConsistentMass(MassModel):
         the clamp.  And a blend whose diagonal D is not the row sums (HRZ:
         q2, serendipity) has ``B 1 != L``, which adds ``blend (L - D) v_ref``.
         """
-        solution = np.zeros_like(rhs)
-        moving = frame is not None and bool(np.any(frame))
+        solution, moving = np.zeros_like(rhs), frame is not None and bool(np.any(frame))
         coupling = None  # M_fc v_ref on the free rows
         if moving and self.fixed is not None:
             coupling = self.apply(np.where(self.fixed, frame, 0.0))

@@ -11,8 +11,5 @@ CASES = {"vibrating_bar": vibrating_bar.run, "cantilever": cantilever.run, "box_
 #: how many simulations each case's ``run`` makes in this process (for a progress bar over them)
 PLANNED_RUNS = {"vibrating_bar": vibrating_bar.planned_runs, "cantilever": cantilever.planned_runs,
                 "box_impact": box_impact.planned_runs, "cost_accuracy": cost_accuracy.planned_runs}
-#: the scenes of the simulations each case makes (its kernels, compiled in parallel on a cold cache)
-WARM_SCENES = {"vibrating_bar": vibrating_bar.warm_scenes, "cantilever": cantilever.warm_scenes,
-               "box_impact": box_impact.warm_scenes, "cost_accuracy": cost_accuracy.warm_scenes}
 
-__all__ = ["CASES", "PLANNED_RUNS", "WARM_SCENES"]
+__all__ = ["CASES", "PLANNED_RUNS"]

@@ -113,11 +113,6 @@ def planned_runs(contacts=("shared", "frictional")) -> int:
     return len(contacts) * len(BASES)
 
 
-def warm_scenes(contacts=("shared", "frictional")) -> list:
-    """The scenes of :func:`run`'s simulations (for :func:`.timing.warm_in_parallel`)."""
-    return [scene_for(basis, contact) for contact in contacts for basis in BASES]
-
-
 def run(out_dir, contacts=("shared", "frictional")) -> dict:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -101,12 +101,8 @@ def received_force(simulation: Simulation) -> float:
     return 0.0
 
 
-def scene_for(scene_name: str, **overrides):
-    return bundled_scene(scene_name).with_overrides(**{"solver.negative_mass": "warn", **overrides})
-
-
 def simulate(scene_name: str, **overrides) -> BeamRun:
-    scene = scene_for(scene_name, **overrides)
+    scene = bundled_scene(scene_name).with_overrides(**{"solver.negative_mass": "warn", **overrides})
     no_stable_step = REGISTRY[scene.grid.basis].critical_step_factors.get(scene.solver.mass) == 0.0
     if scene.time.dt == "auto" and no_stable_step:
         # the basis declares no stable step for this mass (serendipity's row sums); the paper
@@ -152,17 +148,6 @@ def planned_runs(resolutions=PAPER_RESOLUTION, resolution_bases=RESOLUTION_BASES
     """How many simulations :func:`run` makes: both protocols, the large rotation's three,
     the resolution study."""
     return 2 * len(BASES) + len(LARGE_ROTATION) + 2 * len(resolution_bases) * len(resolutions)
-
-
-def warm_scenes(resolutions=PAPER_RESOLUTION, resolution_bases=RESOLUTION_BASES) -> list:
-    """The scenes of :func:`run`'s simulations (for :func:`.timing.warm_in_parallel`)."""
-    scenes = [scene_for(name, **{"grid.basis": basis}) for name in ("cantilever", "cantilever_quasistatic")
-              for basis in BASES]
-    scenes += [scene_for("cantilever_large", **{"grid.basis": basis, "bodies.0.material.model": model})
-               for basis, model, _ in LARGE_ROTATION]
-    return scenes + [scene_for("cantilever_quasistatic", **{"grid.basis": basis, "grid.spacing": spacing, "solver.mass": mass,
-                                                            "solver.consistent_fallback": "blend"})
-                     for spacing in resolutions for basis in resolution_bases for mass in ("lumped", "consistent")]
 
 
 def run(out_dir, resolutions=PAPER_RESOLUTION, resolution_bases=RESOLUTION_BASES) -> dict:

@@ -30,16 +30,6 @@ def planned_runs() -> int:
     return 0
 
 
-def warm_scenes() -> list:
-    """The scenes of the sweeps' runs (for :func:`.timing.warm_in_parallel`)."""
-    from ..scene import load_scene
-    from ..sweep import plan, read_sweep
-    from ..sweep.spec import BUNDLED_SWEEPS
-
-    paths = [BUNDLED_SWEEPS / f"{name}.toml" for name in SWEEPS]
-    return [load_scene(planned.scene_file, planned.overrides) for path in paths for planned in plan(read_sweep(path), path)]
-
-
 def run(out, workers: int | None = None) -> dict:
     """Run :data:`SWEEPS` into ``out``; the fitted orders, ``{sweep: {method: order}}``."""
     from ..output import atomic_write

@@ -56,15 +56,11 @@ OVERLAY_FIGURE = "energy_lumped_vs_consistent.png"
 NEGATIVE_MASS_FIGURE = "negative_masses.png"
 
 
-def scene_for(basis: str, mass: str, **overrides):
-    return bundled_scene("vibrating_bar").with_overrides(
-        **{"grid.basis": basis, "solver.mass": mass, "solver.negative_mass": "warn", **overrides}
-    )
-
-
 def simulate(basis: str, mass: str, **overrides):
     """One bar run; returns (period, result, wall seconds)."""
-    scene = scene_for(basis, mass, **overrides)
+    scene = bundled_scene("vibrating_bar").with_overrides(
+        **{"grid.basis": basis, "solver.mass": mass, "solver.negative_mass": "warn", **overrides}
+    )
     probe = modal_velocity_probe(5.0)
     _, result, wall = timed_run(scene, observers=[probe], label=f"vibrating bar, {basis} {mass}")
     return zero_crossing_period(*probe.arrays()), result, wall
@@ -73,11 +69,6 @@ def simulate(basis: str, mass: str, **overrides):
 def planned_runs() -> int:
     """How many simulations :func:`run` makes."""
     return len(RUNS)
-
-
-def warm_scenes() -> list:
-    """The scenes of :func:`run`'s simulations (for :func:`.timing.warm_in_parallel`)."""
-    return [scene_for(basis, mass, **SETTINGS.get((basis, mass), {})) for basis, mass in RUNS]
 
 
 def run(out_dir) -> dict:
