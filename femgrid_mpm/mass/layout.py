@@ -53,9 +53,7 @@ class SystemsLayout:
     @property
     def every_step(self) -> set:
         """The columns of the systems factored every step (:attr:`.ldl.SymbolicLDL.every_step`)."""
-        if not self.small:
-            return set()
-        return {columns for columns, layout in self.small.items() if layout.every_step}
+        return {columns for columns, layout in (self.small or {}).items() if layout.every_step}
 
 
 def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayout, kept: KeptFactors,

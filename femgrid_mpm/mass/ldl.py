@@ -306,7 +306,9 @@ def _numeric(data, upper_indptr, upper_rows, source, diagonal_source, row_indptr
 @compiled()
 def _solve(rhs, out, order, lower_indptr, lower_rows, lower_data, pivots):
     """``out[order] = L^-T D^-1 L^-1 rhs[order]``; two columns of rhs (both velocity
-    components) in the same sweeps, each entry of ``L`` read once for both."""
+    components) in the same sweeps, each entry of ``L`` read once for both, written out as a
+    pair (a loop over the columns inside the sweeps took 24 us against 14 for q1 at 1e3
+    points); one column (a system of one component) by the same sweeps alone."""
     n = len(order)
     if rhs.shape[1] == 2:
         a = np.empty(n)

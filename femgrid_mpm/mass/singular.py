@@ -37,25 +37,26 @@ def singular_near_edges(system, lattice: np.ndarray, active: np.ndarray, layer_w
     numeric pass (q2 at 1e4 points: SuperLU's ordering and factorization of the block, with
     scipy's extraction of it, were ~1 ms a step); without it SuperLU factors the block.
     """
-    if system.singular is None:
-        system.singular, system.weakest = False, None
-        columns = tuple(system.columns)
-        if layouts is None or columns not in layouts:
-            layer = _near_empty_nodes(lattice, ~active, layer_width) & ~system.excluded
-        if layouts is not None:
-            if columns not in layouts:
-                matrix = system.matrix
-                layouts[columns] = None if not layer.any() else SymbolicLDL.analyse(
-                    matrix.indptr, matrix.indices, matrix.upper_start, ~layer)
-            if layouts[columns] is not None:
-                factors, weakest = layouts[columns].factor(system.matrix.data)
-                system.singular, system.weakest = factors is None, weakest
-            return system.singular
-        nodes = np.flatnonzero(layer)
-        if nodes.size:
-            pivots = _pivots(_rows_and_block(system.matrix, nodes)[1])
-            if pivots is None:
+    if system.singular is not None:
+        return system.singular
+    system.singular, system.weakest = False, None
+    columns = tuple(system.columns)
+    if layouts is not None and columns in layouts:
+        symbolic = layouts[columns]
+    else:
+        layer = _near_empty_nodes(lattice, ~active, layer_width) & ~system.excluded
+        if layouts is None:  # SuperLU on the block
+            nodes = np.flatnonzero(layer)
+            pivots = _pivots(_rows_and_block(system.matrix, nodes)[1]) if nodes.size else None
+            if nodes.size and pivots is None:
                 system.singular = True
-            elif np.min(pivots[1]) < PIVOT_RATIO:
+            elif pivots is not None and np.min(pivots[1]) < PIVOT_RATIO:
                 system.singular, system.weakest = True, int(nodes[pivots[2][np.argmin(pivots[1])]])
+            return system.singular
+        matrix = system.matrix
+        symbolic = layouts[columns] = None if not layer.any() else SymbolicLDL.analyse(
+            matrix.indptr, matrix.indices, matrix.upper_start, ~layer)
+    if symbolic is not None:
+        factors, system.weakest = symbolic.factor(system.matrix.data)
+        system.singular = factors is None
     return system.singular
