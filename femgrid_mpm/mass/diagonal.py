@@ -16,7 +16,7 @@ import scipy.sparse as sp
 
 from ..kernels.compiled import compiled
 from .protocol import Assembly, Inertia, MassModel, NodalSums
-from .scale import CellMasses
+from .scale import CellMasses, scale_arguments
 
 
 @dataclass
@@ -91,7 +91,7 @@ class LumpedMass(MassModel):
         self.lumped = lumped
         absolute = lumped if absolute is None else absolute
         self.scale = self.cells.uniform if sums.scale is None else sums.scale
-        self.smallest = _lumped_inverse(lumped, absolute, *_scale_arguments(self.scale), self._inverse, self.active)
+        self.smallest = _lumped_inverse(lumped, absolute, *scale_arguments(self.scale), self._inverse, self.active)
         self._replace(absolute, volume)
 
     def _replace(self, absolute: np.ndarray, volume: np.ndarray | None) -> None:
@@ -284,17 +284,6 @@ def _absolute_mass(N: sp.csr_matrix, m_p: np.ndarray, lumped: np.ndarray) -> np.
         return lumped
     # a matrix of |N| on N's index arrays, for a transposed product only
     return sp.csr_matrix((np.abs(N.data), N.indices, N.indptr), shape=N.shape).T @ m_p
-
-
-def _scale_arguments(scale: float | np.ndarray) -> tuple[float, np.ndarray]:
-    """``(uniform, per_node)`` for :func:`_lumped_inverse`: one of them in use, the
-    other 0 or empty (one compiled signature for both)."""
-    if not isinstance(scale, np.ndarray):  # a float (one scale); np.ndim costs ~1 us a step
-        return float(scale), _NO_SCALES
-    return 0.0, scale
-
-
-_NO_SCALES = np.zeros(0)
 
 
 @compiled()

@@ -46,10 +46,6 @@ class SystemsLayout:
         direct = linear_solver == "direct" or (linear_solver == "auto" and np.count_nonzero(active) <= DIRECT_LIMIT)
         return cls(active.copy(), weak.copy(), excluded, groups, direct)
 
-    def holds(self, active: np.ndarray, weak: np.ndarray) -> bool:
-        """Whether this is still the layout of these active and weak nodes."""
-        return np.array_equal(active, self.active) and np.array_equal(weak, self.weak)
-
     @property
     def every_step(self) -> set:
         """The columns of the systems factored every step (:attr:`.ldl.SymbolicLDL.every_step`)."""

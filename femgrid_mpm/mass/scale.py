@@ -63,3 +63,14 @@ class CellMasses:
             touched = N.indices[entries][N.data[entries] != 0.0]
             scale[touched] = self.per_body[body]
         return scale
+
+
+def scale_arguments(scale: float | np.ndarray) -> tuple[float, np.ndarray]:
+    """``(uniform, per_node)`` for a compiled pass over the nodes: one of them in use, the
+    other 0 or empty (one compiled signature for both)."""
+    if not isinstance(scale, np.ndarray):  # a float (one scale); np.ndim costs ~1 us a step
+        return float(scale), NO_SCALES
+    return 0.0, scale
+
+
+NO_SCALES = np.zeros(0)
