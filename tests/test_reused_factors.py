@@ -3,13 +3,14 @@ limit, on systems too large to factor every step): the solution against a direct
 same matrix, and the refactor triggers.  The blocks here are small enough for q1 and q2 to be
 factored every step (:mod:`femgrid_mpm.mass.ldl`), which :func:`kept_factors_only` turns off."""
 
+import dataclasses
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from femgrid_mpm.mass import ldl
+from femgrid_mpm.mass import layout, ldl
 from femgrid_mpm.mass.direct import _factor
 from femgrid_mpm.mass.reused import REFACTOR_ITERATIONS, ReusedFactors
 from helpers import advanced_benchmark_block
@@ -100,3 +101,48 @@ def test_a_run_with_kept_factors_stays_near_the_direct_one(basis):
     scale = np.abs(direct.particles.v).max()
     assert np.abs(kept.particles.v - direct.particles.v).max() <= 1e-4 * scale
     assert kept.mass.iterations <= 2 * 30 * REFACTOR_ITERATIONS
+
+
+def free_block_fill(system) -> float:
+    """SuperLU's entries per nonzero entry of the system's free rows, factoring those rows alone."""
+    free = np.flatnonzero(~system.excluded)
+    block = sp.csc_matrix(sp.csr_matrix(system.matrix)[free][:, free])
+    block.eliminate_zeros()
+    return _factor(block).nnz / block.nnz
+
+
+def test_tensor_cg_takes_the_layouts_whose_factors_fill_more_than_the_limit(monkeypatch):
+    """With the limit lowered below the small block's fill, "auto" on cubic splines solves by CG on
+    the tensor preconditioner (no factors kept), its velocities after 30 steps within 1e-4 of the
+    largest against the direct solver's; q1 (no tensor preconditioner) keeps its factors."""
+    monkeypatch.setattr(layout, "FILL_LIMIT", 0.5)
+    direct, tensor = advanced("bspline3", "direct", 30, n=400), advanced("bspline3", "auto", 30, n=400)
+    assert not tensor.mass._layout.direct and not tensor.mass._kept
+    assert all(system.factors is None and system.kept is None for system in tensor.mass._systems)
+    assert tensor.mass.iterations > 0
+    scale = np.abs(direct.particles.v).max()
+    assert np.abs(tensor.particles.v - direct.particles.v).max() <= 1e-4 * scale
+    q1 = advanced("q1", "auto", 3, n=400)
+    assert q1.mass._layout.direct and q1.mass._systems[0].kept is not None
+
+
+@pytest.mark.parametrize("case, chosen", [("square", "cg"), ("bar", "factors")])
+def test_the_fill_decides_between_kept_factors_and_tensor_cg(case, chosen):
+    """Cubic splines at ~1e4 points: the square block (2,809 active nodes) fills its factors more
+    than FILL_LIMIT and takes CG, the bar at h = 0.0625 (1,577 active nodes, a beam 16 elements
+    deep) less and keeps them.  The fill against SuperLU's of the free rows alone, within 5%."""
+    from femgrid_mpm.scene import bundled_scene
+    from femgrid_mpm.solver import Simulation
+
+    if case == "square":
+        simulation = advanced("bspline3", "auto", 1, n=10_000)
+    else:
+        simulation = Simulation(bundled_scene("vibrating_bar").with_overrides(
+            **{"grid.basis": "bspline3", "grid.spacing": 0.0625, "solver.mass": "consistent"}))
+        simulation.advance()
+    mass = simulation.mass
+    system = mass._systems[0]
+    factors = system.factors if system.factors is not None else _factor(system.matrix)
+    measured = layout._fill(dataclasses.replace(system, factors=factors))
+    assert measured == pytest.approx(free_block_fill(system), rel=0.05)
+    assert (measured > layout.FILL_LIMIT) == (chosen == "cg") == (not mass._layout.direct)

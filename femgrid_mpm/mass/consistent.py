@@ -33,7 +33,9 @@ layer along the bodies' edges, :mod:`.preconditioners`), warm-started from
 the last step.  ``"auto"`` takes direct up to 5000 active nodes (exact, and
 its pivots detect a singular matrix; the paper's problems), and CG above;
 below it, the factors are kept over the steps as the preconditioner of CG
-(:mod:`.reused`), refactored when they no longer fit.
+(:mod:`.reused`), refactored when they no longer fit, except for cubic splines
+whose factors fill more than :data:`.layout.FILL_LIMIT`: CG on the tensor
+preconditioner is faster there.
 """
 
 from __future__ import annotations
@@ -211,11 +213,11 @@ class ConsistentMass(MassModel):
             kept = self._kept.fitting(self._layout.groups, self._layout.excluded, self._weak)
         else:  # kept over an unchanged layout, the factors were made for it
             kept = self._kept.fresh(self._layout.groups)
-        layout, self._direct = self._layout, self._layout.direct
-        self._systems, self._correction, kept = make_systems(matrix, diagonal_index, layout, kept, self._weak,
-                                                             self._keeps_factors)
-        if self._keeps_factors:
-            self._kept = kept
+        self._direct = self._layout.direct
+        self._systems, self._correction, kept = make_systems(matrix, diagonal_index, self._layout, kept, self._weak,
+                                                             self._keeps_factors, self.preconditioner is not None)
+        self._direct = self._layout.direct  # (CG where the factors fill too much, see make_systems)
+        self._kept = kept if self._keeps_factors else KeptFactors()
 
     @property
     def _keeps_factors(self) -> bool:

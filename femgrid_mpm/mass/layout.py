@@ -23,6 +23,17 @@ from .system import _System
 #: largest number of active nodes for which "auto" factors the matrix
 DIRECT_LIMIT = 5000
 
+#: ... unless CG has the tensor preconditioner (cubic splines) and SuperLU's factors hold more
+#: than this many entries per nonzero entry of the free rows: then CG on it solves faster than
+#: CG on the kept factors.  Measured (ms a step, kept factors against CG; fill): the block of
+#: benchmarks/step.py at 1089, 1681, 2304, 2809 active nodes 2.9 vs 3.8 (4.55), 6.1 vs 5.0
+#: (5.50), 8.7 vs 5.8 (5.57), 13.6 vs 7.9 (5.85); the bar at h = 0.0625, 1577 nodes, 5.0 vs 5.6
+#: (4.39); the cantilever at h = 0.125 and 0.0625, 737 and 2489 nodes, 2.1 vs 6.1 (2.43) and
+#: 10.2 vs 15.3 (3.62); the manufactured solution at h = 1/32 and 1/64, 1225 and 4489 nodes,
+#: 2.6 vs 3.6 (4.82) and 15.5 vs 11.3 (7.46).  The factors' entries per row grow with the
+#: width of the body (a square fills more than a beam of as many nodes).
+FILL_LIMIT = 5.2
+
 
 @dataclass
 class SystemsLayout:
@@ -53,14 +64,18 @@ class SystemsLayout:
 
 
 def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayout, kept: KeptFactors,
-                 weak: np.ndarray, keeps_factors: bool) -> tuple[list, tuple | None, KeptFactors]:
+                 weak: np.ndarray, keeps_factors: bool, tensor_cg: bool = False) -> tuple[list, tuple | None, KeptFactors]:
     """The step's systems of the assembled ``matrix``: ``(systems, correction, kept)``, the
     entries the exclusion overwrote if it was made into the one system in place, and the
     factors kept for the next steps (``kept``: those that fit the layout).
 
     Below DIRECT_LIMIT, "auto" (``keeps_factors``) factors a small system by the compiled
     ``L D L^T`` on its layout (:mod:`.ldl`), every step where that is cheap, and a larger one
-    by SuperLU; factors not made every step are kept while they fit (:mod:`.reused`)."""
+    by SuperLU; factors not made every step are kept while they fit (:mod:`.reused`).  Where
+    CG has the tensor preconditioner (``tensor_cg``) and SuperLU's first factors of the layout
+    fill more than :data:`FILL_LIMIT`, the layout is solved by that CG instead (not direct);
+    the fill is the structure's, so every step of the layout, and a run resumed from a
+    checkpoint, decides alike."""
     if keeps_factors and (layout.small is None or diagonal_index is None):
         # (the scipy path's structure is its product's, of this step)
         layout.small = small_layouts(matrix, layout.excluded, layout.groups, diagonal_index, layout.small)
@@ -78,6 +93,11 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
         systems = [_System.build(matrix, list(columns), excluded[:, columns[0]],
                                  layout.direct and columns not in kept and columns not in small, diagonal_index)
                    for columns in layout.groups]
+    if keeps_factors and tensor_cg and any(_fill(system) > FILL_LIMIT for system in systems):
+        layout.direct = False
+        for system in systems:
+            system.factors = None
+        return systems, correction, KeptFactors()
     for system in systems:
         columns = tuple(system.columns)
         if columns in small and (columns in every_step or columns not in kept):
@@ -88,3 +108,12 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
             if system.kept is None and tuple(system.columns) not in every_step:
                 kept.keep(system, weak)
     return systems, correction, kept
+
+
+def _fill(system: _System) -> float:
+    """Entries of a system's SuperLU factors per nonzero entry of its free rows (0 without
+    factors); the excluded rows count one each in both."""
+    if system.factors is None:
+        return 0.0
+    excluded = int(np.count_nonzero(system.excluded))
+    return (system.factors.nnz - excluded) / max(int(np.count_nonzero(system.matrix.data)) - excluded, 1)
