@@ -146,3 +146,21 @@ def test_the_fill_decides_between_kept_factors_and_tensor_cg(case, chosen):
     measured = layout._fill(dataclasses.replace(system, factors=factors))
     assert measured == pytest.approx(free_block_fill(system), rel=0.05)
     assert (measured > layout.FILL_LIMIT) == (chosen == "cg") == (not mass._layout.direct)
+
+
+def test_kept_ldl_factors_are_d_l_transpose_exactly():
+    """The upper factor kept from a compiled ``L D L^T`` is ``D L^T`` entry for entry (scipy's
+    transpose and product as the reference), its columns' rows increasing."""
+    simulation = advanced("bspline3", steps=2, n=400)
+    mass = simulation.mass
+    system = mass._systems[0]
+    symbolic = ldl.SymbolicLDL.analyse(system.matrix.indptr, system.matrix.indices, system.matrix.upper_start,
+                                       system.excluded)
+    factors, _ = symbolic.factor(system.matrix.data)
+    kept = ReusedFactors.of_ldl(factors, system.excluded, mass._weak, (0, 1))
+    n = len(system.excluded)
+    lower = sp.csc_matrix((kept.lower[2], kept.lower[1], kept.lower[0]), shape=(n, n))
+    upper = sp.csc_matrix((kept.upper[2], kept.upper[1], kept.upper[0]), shape=(n, n))
+    reference = sp.csc_matrix(lower.T.multiply(kept.upper_diagonal[:, None]))
+    assert (upper != reference).nnz == 0
+    assert all(np.all(np.diff(upper.indices[upper.indptr[j]:upper.indptr[j + 1]]) > 0) for j in range(n))
