@@ -65,11 +65,18 @@ def run_cli(argv, capsys):
     return code, captured.out, captured.err
 
 
+def benchmark_block(basis: str, mass: str, n: int, **solver) -> Scene:
+    """The benchmarks' block (``benchmarks/step.py``) of about ``n`` points; ``solver``: further
+    ``[solver]`` keys."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from step import block_scene  # noqa: E402
+
+    return block_scene(basis, mass, n, **solver)
+
+
 def advanced_benchmark_block(basis, linear_solver="auto", steps=6, n=100):
     """The benchmarks' block (``benchmarks/step.py``) of about ``n`` points with consistent mass
     and this ``linear_solver``, advanced ``steps`` steps (its warnings silenced)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from step import block_scene as benchmark_block  # noqa: E402
     from femgrid_mpm.solver import Simulation
 
     with warnings.catch_warnings():

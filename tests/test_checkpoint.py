@@ -23,7 +23,7 @@ from femgrid_mpm.checkpoint import CHECKPOINT_FILE, CheckpointError, read_checkp
 from femgrid_mpm.observers import COLUMNS
 from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
-from helpers import run_cli
+from helpers import benchmark_block, run_cli
 
 ROOT = Path(__file__).parents[1]
 VIBRATING_BAR = ROOT / "scenes" / "vibrating_bar.toml"
@@ -88,6 +88,10 @@ CASES = {
     # consistent mass, "auto" below the direct limit: the kept factors carry over
     "q1 consistent auto": (bundled_scene("vibrating_bar").with_overrides(
         **{"solver.mass": "consistent", "time.end": 0.6}), 50, None),
+    # consistent mass, kept factors made again at most steps (gimp's block): the small systems go over
+    # to a factorization every step between the checkpoints, and the count towards it carries over
+    "gimp consistent, refactor rate": (benchmark_block("gimp", "consistent", 1000, weak_fraction=0.1).with_overrides(
+        **{"time.end": 1.4, "output.every": 5}), 15, None),
     # HRZ, a neo-Hookean body, gravity, a ramped point load and damping: the work ledger in order
     "q2 hrz, loads": (bundled_scene("cantilever_large").with_overrides(
         **{"grid.basis": "q2", "solver.mass": "hrz", "bodies.0.material.model": "neo_hookean", "time.end": 0.6,

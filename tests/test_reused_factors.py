@@ -12,8 +12,9 @@ import scipy.sparse.linalg as spla
 
 from femgrid_mpm.mass import layout, ldl
 from femgrid_mpm.mass.direct import _factor
-from femgrid_mpm.mass.reused import REFACTOR_ITERATIONS, ReusedFactors
-from helpers import advanced_benchmark_block
+from femgrid_mpm.mass.reused import RATE_LIMIT, RATE_WINDOW, REFACTOR_ITERATIONS, RefactorRate, ReusedFactors
+from femgrid_mpm.solver import Simulation
+from helpers import advanced_benchmark_block, benchmark_block
 
 
 
@@ -164,3 +165,41 @@ def test_kept_ldl_factors_are_d_l_transpose_exactly():
     reference = sp.csc_matrix(lower.T.multiply(kept.upper_diagonal[:, None]))
     assert (upper != reference).nnz == 0
     assert all(np.all(np.diff(upper.indices[upper.indptr[j]:upper.indptr[j + 1]]) > 0) for j in range(n))
+
+
+def test_refactor_rate_switches_at_its_limit():
+    """Eight refactorizations in a window of twenty steps switch to factoring every step, seven do not;
+    the count starts again with each window and comes back from a checkpoint's values."""
+    assert (RATE_WINDOW, RATE_LIMIT) == (20, 0.4)
+    below, at = RefactorRate(), RefactorRate()
+    for step in range(RATE_WINDOW):
+        below.observe(step < 7)
+        at.observe(step >= 12)
+    assert not below.every_step and at.every_step
+    below.observe(True)
+    assert (below.steps, below.refactors) == (1, 1)
+    assert RefactorRate.restored(below.values()) == below and RefactorRate.restored(None) == RefactorRate()
+
+
+def test_small_systems_whose_kept_factors_go_stale_are_factored_every_step(monkeypatch):
+    """GIMP's block at 1e3 points (weak_fraction 0.1, as benchmarked) remakes its kept factors at most
+    steps: within two windows the small system is factored every step (its own factors, none kept),
+    and the run stays within 1e-4 of the largest velocity of the direct solver's; cubic splines'
+    factors last, and stay kept."""
+    monkeypatch.setattr(ldl, "EVERY_STEP_NODES", 1500)  # the fixture's 0 would leave no small system
+    settings = {"solver.weak_fraction": 0.1}
+    runs = {}
+    for solver in ("direct", "auto"):
+        simulation = Simulation(benchmark_block("gimp", "consistent", 1000).with_overrides(
+            **settings, **{"solver.linear_solver": solver}))
+        for _ in range(2 * RATE_WINDOW + 5):
+            simulation.advance()
+        runs[solver] = simulation
+    mass = runs["auto"].mass
+    assert mass._refactor_rate.every_step
+    system = mass._systems[0]
+    assert system.ldl is not None and system.kept is None and not mass._kept
+    scale = np.abs(runs["direct"].particles.v).max()
+    assert np.abs(runs["auto"].particles.v - runs["direct"].particles.v).max() <= 1e-4 * scale
+    splines = advanced("bspline3", "auto", 2 * RATE_WINDOW + 5, n=1000)
+    assert not splines.mass._refactor_rate.every_step and splines.mass._systems[0].kept is not None

@@ -46,11 +46,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from .cg import _preconditioned_cg, initial_guess
-from .direct import _direct_solve, _factor, _smallest_pivot_node
+from .direct import _direct_solve, _factor
 from .exclusion import active_and_weak, unexcluded_apply, unexcluded_matrix
 from .layout import SystemsLayout, make_systems
 from .preconditioners import TensorPreconditioner
-from .reused import KeptFactors
+from .reused import KeptFactors, RefactorRate
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
 from .scale import NO_SCALES, CellMasses, scale_arguments
 from .singular import singular_near_edges
@@ -144,6 +144,7 @@ class ConsistentMass(MassModel):
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
         # "auto" below DIRECT_LIMIT: the factors kept from an earlier step, per system's columns
         self._kept = KeptFactors()
+        self._refactor_rate = RefactorRate()  # whether the small systems are factored every step from now on
         self._over_pattern = PatternMatrix()
         self._layout = None  # the systems' layout (.layout), kept while the active and weak nodes stay
 
@@ -155,7 +156,7 @@ class ConsistentMass(MassModel):
         arrays.update(self._kept.arrays())
         values = {"iterations": self.iterations, "weak_nodes": self.weak_nodes, "blended_steps": self.blended_steps,
                   "previous": {kind: len(history) for kind, history in self._previous.items()},
-                  "kept": len(self._kept)}
+                  "kept": len(self._kept), "refactor_rate": self._refactor_rate.values()}
         return arrays, values
 
     def restore(self, arrays: dict, values: dict) -> None:
@@ -165,6 +166,7 @@ class ConsistentMass(MassModel):
         self._previous = {kind: tuple(np.array(arrays[f"previous.{kind}.{index}"]) for index in range(count))
                           for kind, count in values["previous"].items()}
         self._kept = KeptFactors.restored(arrays, values.get("kept", 0))
+        self._refactor_rate = RefactorRate.restored(values.get("refactor_rate"))
         self._layout = None
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
@@ -214,10 +216,16 @@ class ConsistentMass(MassModel):
         else:  # kept over an unchanged layout, the factors were made for it
             kept = self._kept.fresh(self._layout.groups)
         self._direct = self._layout.direct
+        every_step = self._refactor_rate.every_step
         self._systems, self._correction, kept = make_systems(matrix, diagonal_index, self._layout, kept, self._weak,
-                                                             self._keeps_factors, self.preconditioner is not None)
+                                                             self._keeps_factors, self.preconditioner is not None,
+                                                             every_step)
         self._direct = self._layout.direct  # (CG where the factors fill too much, see make_systems)
         self._kept = kept if self._keeps_factors else KeptFactors()
+        if self._keeps_factors and not every_step and set(self._layout.small or ()) - self._layout.every_step:
+            # small systems on kept factors: were they made again this step?
+            self._refactor_rate.observe(any(system.ldl is not None and tuple(system.columns) not in
+                                            self._layout.every_step for system in self._systems))
 
     @property
     def _keeps_factors(self) -> bool:
@@ -337,7 +345,7 @@ class ConsistentMass(MassModel):
                     f"the consistent mass matrix is singular or nearly so: {how} on the {kind} system "
                     f"(too few points per cell for the basis, or weakly supported nodes); use more points "
                     f"per cell, lumped mass, or solver.consistent_fallback = 'blend'",
-                    self._weakest_node(system, right_hand_side(), solution))
+                    system.weakest_node(right_hand_side(), solution, self._direct))
             if not system.blended:
                 self.blended_steps += 1
             system.blend_with(self._blend_target(), self.blend, self._direct)
@@ -345,7 +353,7 @@ class ConsistentMass(MassModel):
             solution, converged = self._solve(system, right_hand_side(), kind)
             if not converged:
                 raise SingularMassError(f"the blended mass matrix could not be solved either ({kind} system)",
-                                        self._weakest_node(system, right_hand_side(), solution))
+                                        system.weakest_node(right_hand_side(), solution, self._direct))
         return solution
 
     def _singular_near_edges(self, system: "_System") -> bool:
@@ -356,17 +364,6 @@ class ConsistentMass(MassModel):
         compiled = isinstance(system.matrix, _CompiledCSR) and system.matrix.upper_start is not None
         return singular_near_edges(system, self.lattice, self.active, self.layer_width,
                                    self._layout.edges if compiled else None)
-
-    def _weakest_node(self, system: "_System", rhs: np.ndarray, solution: np.ndarray) -> int | None:
-        """Where a failed solve's matrix is weakest (for the stop's message): the node of the
-        smallest pivot against its diagonal entry (direct, or CG's check near the edges), or
-        of the largest residual (CG)."""
-        if system.singular:
-            return system.weakest
-        if self._direct:
-            return _smallest_pivot_node(system.matrix)
-        residual = np.linalg.norm(rhs - system.matrix @ solution, axis=1)
-        return int(np.argmax(residual)) if np.all(np.isfinite(residual)) else None
 
     def _solve(self, system: "_System", rhs: np.ndarray, kind: str) -> tuple[np.ndarray, bool]:
         if self._direct:

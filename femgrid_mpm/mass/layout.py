@@ -62,9 +62,15 @@ class SystemsLayout:
         """The columns of the systems factored every step (:attr:`.ldl.SymbolicLDL.every_step`)."""
         return {columns for columns, layout in (self.small or {}).items() if layout.every_step}
 
+    @property
+    def every_step_when_stale(self) -> set:
+        """The same where kept factors go stale at most steps (:attr:`.ldl.SymbolicLDL.every_step_when_stale`)."""
+        return {columns for columns, layout in (self.small or {}).items() if layout.every_step_when_stale}
+
 
 def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayout, kept: KeptFactors,
-                 weak: np.ndarray, keeps_factors: bool, tensor_cg: bool = False) -> tuple[list, tuple | None, KeptFactors]:
+                 weak: np.ndarray, keeps_factors: bool, tensor_cg: bool = False,
+                 small_every_step: bool = False) -> tuple[list, tuple | None, KeptFactors]:
     """The step's systems of the assembled ``matrix``: ``(systems, correction, kept)``, the
     entries the exclusion overwrote if it was made into the one system in place, and the
     factors kept for the next steps (``kept``: those that fit the layout).
@@ -75,11 +81,13 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
     CG has the tensor preconditioner (``tensor_cg``) and SuperLU's first factors of the layout
     fill more than :data:`FILL_LIMIT`, the layout is solved by that CG instead (not direct);
     the fill is the structure's, so every step of the layout, and a run resumed from a
-    checkpoint, decides alike."""
+    checkpoint, decides alike.  ``small_every_step``: the kept factors were made again too often
+    (:class:`.reused.RefactorRate`): more of the small systems are factored every step."""
     if keeps_factors and (layout.small is None or diagonal_index is None):
         # (the scipy path's structure is its product's, of this step)
         layout.small = small_layouts(matrix, layout.excluded, layout.groups, diagonal_index, layout.small)
-    excluded, every_step, small = layout.excluded, layout.every_step, layout.small or {}
+    excluded, small = layout.excluded, layout.small or {}
+    every_step = layout.every_step_when_stale if small_every_step else layout.every_step
     kept = KeptFactors({columns: factors for columns, factors in kept.items() if columns not in every_step})
     correction = None
     if diagonal_index is not None and len(layout.groups) == 1:

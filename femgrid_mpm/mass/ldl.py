@@ -43,6 +43,10 @@ EVERY_STEP_NODES = 1500
 #: q1, q2, serendipity at 1e3 points 15-18 (factor 56 us, two solves 36 us, against CG's
 #: 140 us), cubic splines 58 and gimp 37 (factor 600 and 240 us) are left to the kept factors
 EVERY_STEP_WORK = 24
+#: ... or this many where the kept factors are made again at most steps anyway
+#: (:class:`.reused.RefactorRate`): gimp at 1e3 points (37.7) 0.73-0.75 -> 0.55-0.62 ms a step
+#: factored every step, at 4e3 points (72.4) 3.66 -> 4.45 ms
+STALE_WORK = 48
 
 
 @dataclass
@@ -107,12 +111,23 @@ class SymbolicLDL:
                 and np.array_equal(matrix.indices, self.structure[1]))
 
     @functools.cached_property
+    def work(self) -> float:
+        """The numeric pass against a solve: ``sum(c_j^2)`` over the columns' counts of ``L``,
+        per entry of ``L``."""
+        counts = np.diff(self.lower_indptr).astype(float)
+        return float(np.sum(counts**2)) / max(self.factor_entries, 1)
+
+    @functools.cached_property
     def every_step(self) -> bool:
         """Whether factoring this layout every step is cheaper than CG on kept factors
         (:data:`EVERY_STEP_NODES`, :data:`EVERY_STEP_WORK`)."""
-        counts = np.diff(self.lower_indptr)
-        return len(self.order) <= EVERY_STEP_NODES and \
-            float(np.sum(counts.astype(float) ** 2)) <= EVERY_STEP_WORK * max(self.factor_entries, 1)
+        return len(self.order) <= EVERY_STEP_NODES and self.work <= EVERY_STEP_WORK
+
+    @property
+    def every_step_when_stale(self) -> bool:
+        """The same where the kept factors are made again at most steps anyway
+        (:class:`.reused.RefactorRate`, :data:`STALE_WORK`)."""
+        return len(self.order) <= EVERY_STEP_NODES and self.work <= STALE_WORK
 
     @property
     def factor_entries(self) -> int:

@@ -37,6 +37,47 @@ REFACTOR_ITERATIONS = 3
 REUSED_MAX_ITERATIONS = 12
 
 
+#: steps over which :class:`RefactorRate` counts the small systems' refactorizations ...
+RATE_WINDOW = 20
+#: ... and the share of them at or above which the small systems are factored every step
+RATE_LIMIT = 0.4
+
+
+@dataclass
+class RefactorRate:
+    """How often the kept factors of the small systems (:mod:`.ldl`) are made again; once they
+    are in :data:`RATE_LIMIT` of :data:`RATE_WINDOW` steps (``every_step``), the small systems
+    that factor cheaply enough (:data:`.ldl.STALE_WORK`) are factored every step for the rest of
+    the run: CG's iterations on factors that keep going stale buy nothing.
+
+    GIMP's block at 1e3 points made its kept factors again at 93 of 200 steps (a solve took more
+    than :data:`REFACTOR_ITERATIONS`, or the free nodes changed); cubic splines' at 16 of 200 and
+    q1's at 1e4 points once.  The count is of the run's steps, not of the machine's speed, so a
+    run and its resumption from a checkpoint decide alike."""
+
+    steps: int = 0
+    refactors: int = 0
+    every_step: bool = False
+
+    def observe(self, refactored: bool) -> None:
+        """One step of small systems on kept factors, whether they were made again."""
+        if self.every_step:
+            return
+        self.steps += 1
+        self.refactors += bool(refactored)
+        if self.steps == RATE_WINDOW:
+            self.every_step = self.refactors >= RATE_LIMIT * RATE_WINDOW
+            self.steps, self.refactors = 0, 0
+
+    def values(self) -> list:
+        """A checkpoint's values (:meth:`restored`)."""
+        return [self.steps, self.refactors, self.every_step]
+
+    @classmethod
+    def restored(cls, values: list | None) -> "RefactorRate":
+        return cls() if values is None else cls(int(values[0]), int(values[1]), bool(values[2]))
+
+
 @dataclass
 class ReusedFactors:
     """SuperLU's factors of one system as compiled arrays, and what they were made for.

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .direct import _factor
+from .direct import _factor, _smallest_pivot_node
 from .ldl import NumericLDL, SymbolicLDL
 from .exclusion import _exclude_in_place
 from .preconditioners import BoundaryLayer
@@ -75,6 +75,17 @@ class _System:
         self.layout = symbolic
         self.ldl, self.weakest = symbolic.factor(data)
         self.singular = self.ldl is None  # its weakest node, for the stop's message
+
+    def weakest_node(self, rhs: np.ndarray, solution: np.ndarray, direct: bool) -> int | None:
+        """Where a failed solve finds the matrix weakest (for the stop's message): the node of the
+        smallest pivot against its diagonal entry (direct, or CG's check near the edges), or
+        of the largest residual (CG)."""
+        if self.singular:
+            return self.weakest
+        if direct:
+            return _smallest_pivot_node(self.matrix)
+        residual = np.linalg.norm(rhs - self.matrix @ solution, axis=1)
+        return int(np.argmax(residual)) if np.all(np.isfinite(residual)) else None
 
     def blend_with(self, target: np.ndarray, weight: float, direct: bool) -> None:
         """The fallback: ``(1 - weight) M + weight diag(target)`` on the kept rows."""
