@@ -106,7 +106,8 @@ class SolverSpec(_Model):
     mass matrix is singular (see :mod:`femgrid_mpm.mass`), with ``blend``
     the lumped weight; ``weak_fraction`` the volume fraction under which a
     node is lumped; ``linear_solver`` how the consistent system is solved
-    (``"auto"``: SuperLU up to 5000 active nodes, CG beyond);
+    (``"auto"``: up to 5000 active nodes factored, every step or kept as CG's
+    preconditioner, CG beyond; docs/scenes.md);
     ``cg_tolerance`` CG's relative residual; ``engine``
     the implementation of the step's transfers (:mod:`femgrid_mpm.kernels`).
     ``scheme``: the time integration, ``"paper"`` (section 3.2 as written),
