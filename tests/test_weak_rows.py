@@ -169,3 +169,33 @@ def test_gimp_points_crossing_a_node_line_keep_their_energy():
     energy = result.energy
     assert np.abs(energy["total_error"]).max() < 1e-3 * energy["total"][0]
     assert result.summary["consistent_mass"]["weak_rows_last_step"] > 0
+
+
+@pytest.mark.parametrize("per_node", [False, True])
+@pytest.mark.parametrize("weak_test", [False, True])
+def test_the_nodes_tests_are_numpys(per_node, weak_test):
+    """The compiled pass of a step's node tests against numpy's formulas: active where the diagonal
+    is above 1e-24 of a full cell, weak where also the volume fraction is below ``weak_fraction``,
+    their count, the smallest row sum, and whether both sets are the last ones."""
+    from femgrid_mpm.mass.exclusion import active_and_weak
+    from femgrid_mpm.mass.scale import NO_SCALES, scale_arguments
+
+    rng = np.random.default_rng(3)
+    n = 400
+    cell = rng.uniform(0.5, 2.0, n) if per_node else 1.3
+    diagonal = np.where(rng.random(n) < 0.2, 0.0, rng.uniform(0.0, 1.0, n)) * cell
+    diagonal[:5] = 1e-24 * (cell[:5] if per_node else cell) * np.array([0.5, 1.0, 1.5, 2.0, 0.0])
+    lumped = rng.normal(1.0, 1.0, n)
+    volume, integrals = rng.uniform(0.0, 0.05, n), rng.uniform(0.5, 1.5, n)
+    active = diagonal > 1e-24 * cell
+    fraction = np.divide(volume, integrals, out=np.ones(n), where=active)
+    weak = active & (fraction < 0.02) if weak_test else np.zeros(n, dtype=bool)
+    for last in (None, (active, weak), (active, ~weak)):
+        got_active, got_weak = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+        count, smallest, unchanged = active_and_weak(
+            diagonal, *scale_arguments(cell), lumped, *((volume, integrals) if weak_test else (NO_SCALES,) * 2),
+            0.02, got_active, got_weak, *(last or (np.zeros(0, dtype=bool),) * 2))
+        np.testing.assert_array_equal(got_active, active)
+        np.testing.assert_array_equal(got_weak, weak)
+        assert count == np.count_nonzero(weak) and smallest == lumped.min()
+        assert unchanged == (last is not None and np.array_equal(last[1], weak))
