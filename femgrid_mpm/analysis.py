@@ -70,7 +70,8 @@ def bar_axial_period_2d(
         return density * dot(u, v)
 
     stiffness = skfem.asm(linear_elasticity(lam, mu), basis)
-    eigenvalues, modes = eigsh(stiffness, k=8, M=skfem.asm(mass, basis), sigma=-1e-3 * E / density)
+    eigenvalues, modes = eigsh(stiffness, k=8, M=skfem.asm(mass, basis), sigma=-1e-3 * E / density,
+                               v0=np.random.default_rng(0).standard_normal(stiffness.shape[0]))  # ARPACK's own draw varies
     order = np.argsort(eigenvalues)[3:]  # three rigid-body modes first
     ux = np.abs(modes[basis.nodal_dofs[0]][:, order]).mean(axis=0)
     uy = np.abs(modes[basis.nodal_dofs[1]][:, order]).mean(axis=0)

@@ -309,3 +309,23 @@ def test_checkpoint_every_must_be_a_positive_count(tmp_path, capsys, value):
 def test_read_checkpoint_errors_are_checkpoint_errors(tmp_path):
     with pytest.raises(CheckpointError, match="no checkpoint here"):
         read_checkpoint(tmp_path / CHECKPOINT_FILE)
+
+
+def test_cubic_splines_choice_of_tensor_cg_carries_over(tmp_path, monkeypatch):
+    """The choice between kept factors and CG on the tensor preconditioner is made at the run's
+    first factorization and kept for the run: the fill moves with the points (the drifting bar at
+    h = 0.05 from 5.58 at the start to 5.38), so a resumed run that measured it again would choose
+    otherwise than the run it continues.  With the limit between the two, the run takes CG, and so
+    does the resumed one, bit for bit."""
+    from femgrid_mpm.mass import layout
+
+    monkeypatch.setattr(layout, "FILL_LIMIT", 5.5)
+    scene = bundled_scene("drifting_bar").with_overrides(
+        **{"grid.basis": "bspline3", "grid.spacing": 0.05, "solver.mass": "consistent", "time.dt": 0.001,
+           "time.end": 0.04, "output.every": 5})
+    reference_simulation = Simulation(scene)
+    reference = reference_simulation.run()
+    assert reference_simulation.mass._tensor_cg and not reference_simulation.mass._layout.direct
+    resumed_simulation, resumed = interrupted_then_resumed(scene, tmp_path, 10, stop_after=2)
+    assert resumed_simulation.mass._tensor_cg
+    assert_same_run(resumed, reference)

@@ -145,6 +145,7 @@ class ConsistentMass(MassModel):
         # "auto" below DIRECT_LIMIT: the factors kept from an earlier step, per system's columns
         self._kept = KeptFactors()
         self._refactor_rate = RefactorRate()  # whether the small systems are factored every step from now on
+        self._tensor_cg: bool | None = None  # cubic splines' CG instead of kept factors (.layout.FILL_LIMIT)
         self._over_pattern = PatternMatrix()
         self._layout = None  # the systems' layout (.layout), kept while the active and weak nodes stay
 
@@ -156,7 +157,7 @@ class ConsistentMass(MassModel):
         arrays.update(self._kept.arrays())
         values = {"iterations": self.iterations, "weak_nodes": self.weak_nodes, "blended_steps": self.blended_steps,
                   "previous": {kind: len(history) for kind, history in self._previous.items()},
-                  "kept": len(self._kept), "refactor_rate": self._refactor_rate.values()}
+                  "kept": len(self._kept), "refactor_rate": self._refactor_rate.values(), "tensor_cg": self._tensor_cg}
         return arrays, values
 
     def restore(self, arrays: dict, values: dict) -> None:
@@ -167,6 +168,7 @@ class ConsistentMass(MassModel):
                           for kind, count in values["previous"].items()}
         self._kept = KeptFactors.restored(arrays, values.get("kept", 0))
         self._refactor_rate = RefactorRate.restored(values.get("refactor_rate"))
+        self._tensor_cg = values.get("tensor_cg")
         self._layout = None
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
@@ -212,15 +214,18 @@ class ConsistentMass(MassModel):
             return
         if not unchanged:
             self._layout = SystemsLayout.of(self.active, self._weak, self.fixed, self.linear_solver)
+            self._layout.direct &= not self._tensor_cg
             kept = self._kept.fitting(self._layout.groups, self._layout.excluded, self._weak)
         else:  # kept over an unchanged layout, the factors were made for it
             kept = self._kept.fresh(self._layout.groups)
         self._direct = self._layout.direct
         every_step = self._refactor_rate.every_step
-        self._systems, self._correction, kept = make_systems(matrix, diagonal_index, self._layout, kept, self._weak,
-                                                             self._keeps_factors, self.preconditioner is not None,
-                                                             every_step)
-        self._direct = self._layout.direct  # (CG where the factors fill too much, see make_systems)
+        self._systems, self._correction, kept = make_systems(
+            matrix, diagonal_index, self._layout, kept, self._weak, self._keeps_factors,
+            self.preconditioner is not None and self._tensor_cg is None, every_step)
+        if self._layout.fill is not None and self._tensor_cg is None:  # make_systems' choice, for the run
+            self._tensor_cg = not self._layout.direct
+        self._direct = self._layout.direct
         self._kept = kept if self._keeps_factors else KeptFactors()
         if self._keeps_factors and not every_step and set(self._layout.small or ()) - self._layout.every_step:
             # small systems on kept factors: were they made again this step?

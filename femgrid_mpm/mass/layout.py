@@ -47,6 +47,7 @@ class SystemsLayout:
     groups: list
     direct: bool
     small: dict | None = None  # {columns: SymbolicLDL}; None: not analysed yet
+    fill: float | None = None  # SuperLU's fill, where make_systems measured it (:func:`_fill`)
     edges: dict = field(default_factory=dict)  # {columns: SymbolicLDL or None} (.singular)
 
     @classmethod
@@ -69,7 +70,7 @@ class SystemsLayout:
 
 
 def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayout, kept: KeptFactors,
-                 weak: np.ndarray, keeps_factors: bool, tensor_cg: bool = False,
+                 weak: np.ndarray, keeps_factors: bool, fill_test: bool = False,
                  small_every_step: bool = False) -> tuple[list, tuple | None, KeptFactors]:
     """The step's systems of the assembled ``matrix``: ``(systems, correction, kept)``, the
     entries the exclusion overwrote if it was made into the one system in place, and the
@@ -77,11 +78,11 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
 
     Below DIRECT_LIMIT, "auto" (``keeps_factors``) factors a small system by the compiled
     ``L D L^T`` on its layout (:mod:`.ldl`), every step where that is cheap, and a larger one
-    by SuperLU; factors not made every step are kept while they fit (:mod:`.reused`).  Where
-    CG has the tensor preconditioner (``tensor_cg``) and SuperLU's first factors of the layout
-    fill more than :data:`FILL_LIMIT`, the layout is solved by that CG instead (not direct);
-    the fill is the structure's, so every step of the layout, and a run resumed from a
-    checkpoint, decides alike.  ``small_every_step``: the kept factors were made again too often
+    by SuperLU; factors not made every step are kept while they fit (:mod:`.reused`).  With
+    ``fill_test`` (CG has the tensor preconditioner, and the run has not decided yet) SuperLU's
+    factors are measured (``layout.fill``) and, above :data:`FILL_LIMIT`, the layout is solved by
+    that CG instead (not direct): the caller keeps the decision for the run, since the fill moves
+    with the points (their couplings' zeros) while the layout stays.  ``small_every_step``: the kept factors were made again too often
     (:class:`.reused.RefactorRate`): more of the small systems are factored every step."""
     if keeps_factors and (layout.small is None or diagonal_index is None):
         # (the scipy path's structure is its product's, of this step)
@@ -101,11 +102,13 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
         systems = [_System.build(matrix, list(columns), excluded[:, columns[0]],
                                  layout.direct and columns not in kept and columns not in small, diagonal_index)
                    for columns in layout.groups]
-    if keeps_factors and tensor_cg and any(_fill(system) > FILL_LIMIT for system in systems):
-        layout.direct = False
-        for system in systems:
-            system.factors = None
-        return systems, correction, KeptFactors()
+    if keeps_factors and fill_test and any(system.factors is not None for system in systems):
+        layout.fill = max(_fill(system) for system in systems)
+        if layout.fill > FILL_LIMIT:
+            layout.direct = False
+            for system in systems:
+                system.factors = None
+            return systems, correction, KeptFactors()
     for system in systems:
         columns = tuple(system.columns)
         if columns in small and (columns in every_step or columns not in kept):
