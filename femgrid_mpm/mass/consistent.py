@@ -218,7 +218,7 @@ class ConsistentMass(MassModel):
             kept = self._kept.fitting(self._layout.groups, self._layout.excluded, self._weak)
         else:  # kept over an unchanged layout, the factors were made for it
             kept = self._kept.fresh(self._layout.groups)
-        self._direct = self._layout.direct
+        self._direct = self._layout.direct  # (_keeps_factors reads it; make_systems may change the layout's)
         every_step = self._refactor_rate.every_step
         self._systems, self._correction, kept = make_systems(
             matrix, diagonal_index, self._layout, kept, self._weak, self._keeps_factors,

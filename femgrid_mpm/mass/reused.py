@@ -52,8 +52,8 @@ class RefactorRate:
 
     GIMP's block at 1e3 points made its kept factors again at 93 of 200 steps (a solve took more
     than :data:`REFACTOR_ITERATIONS`, or the free nodes changed); cubic splines' at 16 of 200 and
-    q1's at 1e4 points once.  The count is of the run's steps, not of the machine's speed, so a
-    run and its resumption from a checkpoint decide alike."""
+    q1's at 1e4 points once.  The count is of the run's steps, not of the machine's speed, and
+    it is in the checkpoint: a run and its resumption decide alike."""
 
     steps: int = 0
     refactors: int = 0
