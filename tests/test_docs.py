@@ -86,7 +86,8 @@ def test_the_readme_scene_is_valid(tmp_path, capsys):
     (scene,) = re.findall(r"```toml\n(.*?)```", (ROOT / "README.md").read_text(), flags=re.S)
     (tmp_path / "bar.toml").write_text(scene)
     code, _, err = run_cli(["info", tmp_path / "bar.toml"], capsys)
-    assert code == 0 and err == ""
+    # nothing on stderr but, where this tree's kernel cache is still cold, the note that says so
+    assert code == 0 and all("compiling the numba kernels" in line for line in err.splitlines())
 
 
 @pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(ROOT)) for p in PAGES])
