@@ -325,7 +325,7 @@ def test_cubic_splines_choice_of_tensor_cg_carries_over(tmp_path, monkeypatch):
            "time.end": 0.04, "output.every": 5})
     reference_simulation = Simulation(scene)
     reference = reference_simulation.run()
-    assert reference_simulation.mass._tensor_cg and not reference_simulation.mass._layout.direct
+    assert reference_simulation.mass._choices.tensor_cg and not reference_simulation.mass._layout.direct
     resumed_simulation, resumed = interrupted_then_resumed(scene, tmp_path, 10, stop_after=2)
-    assert resumed_simulation.mass._tensor_cg
+    assert resumed_simulation.mass._choices.tensor_cg
     assert_same_run(resumed, reference)

@@ -196,10 +196,10 @@ def test_small_systems_whose_kept_factors_go_stale_are_factored_every_step(monke
             simulation.advance()
         runs[solver] = simulation
     mass = runs["auto"].mass
-    assert mass._refactor_rate.every_step
+    assert mass._choices.rate.every_step
     system = mass._systems[0]
     assert system.ldl is not None and system.kept is None and not mass._kept
     scale = np.abs(runs["direct"].particles.v).max()
     assert np.abs(runs["auto"].particles.v - runs["direct"].particles.v).max() <= 1e-4 * scale
     splines = advanced("bspline3", "auto", 2 * RATE_WINDOW + 5, n=1000)
-    assert not splines.mass._refactor_rate.every_step and splines.mass._systems[0].kept is not None
+    assert not splines.mass._choices.rate.every_step and splines.mass._systems[0].kept is not None

@@ -47,19 +47,16 @@ import scipy.sparse as sp
 
 from .cg import _preconditioned_cg, initial_guess
 from .direct import _direct_solve, _factor
-from .exclusion import active_and_weak, unexcluded_apply, unexcluded_matrix
-from .layout import SystemsLayout, make_systems
+from .exclusion import NO_NODES, active_and_weak, unexcluded_apply, unexcluded_matrix
+from .layout import RunChoices
 from .preconditioners import TensorPreconditioner
-from .reused import KeptFactors, RefactorRate
+from .reused import KeptFactors
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
 from .scale import NO_SCALES, CellMasses, scale_arguments
 from .singular import singular_near_edges
 from .sparse import PatternMatrix, _CompiledCSR
 from .system import _System
 from .weak_rows import lumped_and_mixed, mix_target, weak_by_ratio
-
-NO_NODES = np.zeros(0, dtype=bool)  # no layout yet: nothing to compare the nodes' tests with
-
 
 @dataclass
 class ConsistentMass(MassModel):
@@ -144,8 +141,7 @@ class ConsistentMass(MassModel):
         self.max_iterations = int(200 + 20 * np.sqrt(self.n_nodes))
         # "auto" below DIRECT_LIMIT: the factors kept from an earlier step, per system's columns
         self._kept = KeptFactors()
-        self._refactor_rate = RefactorRate()  # whether the small systems are factored every step from now on
-        self._tensor_cg: bool | None = None  # cubic splines' CG instead of kept factors (.layout.FILL_LIMIT)
+        self._choices = RunChoices()  # what "auto" measured during the run
         self._over_pattern = PatternMatrix()
         self._layout = None  # the systems' layout (.layout), kept while the active and weak nodes stay
 
@@ -157,7 +153,7 @@ class ConsistentMass(MassModel):
         arrays.update(self._kept.arrays())
         values = {"iterations": self.iterations, "weak_nodes": self.weak_nodes, "blended_steps": self.blended_steps,
                   "previous": {kind: len(history) for kind, history in self._previous.items()},
-                  "kept": len(self._kept), "refactor_rate": self._refactor_rate.values(), "tensor_cg": self._tensor_cg}
+                  "kept": len(self._kept), **self._choices.values()}
         return arrays, values
 
     def restore(self, arrays: dict, values: dict) -> None:
@@ -167,8 +163,7 @@ class ConsistentMass(MassModel):
         self._previous = {kind: tuple(np.array(arrays[f"previous.{kind}.{index}"]) for index in range(count))
                           for kind, count in values["previous"].items()}
         self._kept = KeptFactors.restored(arrays, values.get("kept", 0))
-        self._refactor_rate = RefactorRate.restored(values.get("refactor_rate"))
-        self._tensor_cg = values.get("tensor_cg")
+        self._choices = RunChoices.restored(values)
         self._layout = None
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
@@ -213,24 +208,15 @@ class ConsistentMass(MassModel):
         if not self.solves:
             return
         if not unchanged:
-            self._layout = SystemsLayout.of(self.active, self._weak, self.fixed, self.linear_solver)
-            self._layout.direct &= not self._tensor_cg
+            self._layout = self._choices.layout(self.active, self._weak, self.fixed, self.linear_solver)
             kept = self._kept.fitting(self._layout.groups, self._layout.excluded, self._weak)
         else:  # kept over an unchanged layout, the factors were made for it
             kept = self._kept.fresh(self._layout.groups)
-        self._direct = self._layout.direct  # (_keeps_factors reads it; make_systems may change the layout's)
-        every_step = self._refactor_rate.every_step
-        self._systems, self._correction, kept = make_systems(
-            matrix, diagonal_index, self._layout, kept, self._weak, self._keeps_factors,
-            self.preconditioner is not None and self._tensor_cg is None, every_step)
-        if self._layout.fill is not None and self._tensor_cg is None:  # make_systems' choice, for the run
-            self._tensor_cg = not self._layout.direct
+        self._direct = self._layout.direct  # (_keeps_factors reads it; the choices may change the layout's)
+        self._systems, self._correction, kept = self._choices.systems(
+            matrix, diagonal_index, self._layout, kept, self._weak, self._keeps_factors, self.preconditioner is not None)
         self._direct = self._layout.direct
         self._kept = kept if self._keeps_factors else KeptFactors()
-        if self._keeps_factors and not every_step and set(self._layout.small or ()) - self._layout.every_step:
-            # small systems on kept factors: were they made again this step?
-            self._refactor_rate.observe(any(system.ldl is not None and tuple(system.columns) not in
-                                            self._layout.every_step for system in self._systems))
 
     @property
     def _keeps_factors(self) -> bool:

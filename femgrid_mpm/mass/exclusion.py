@@ -22,6 +22,9 @@ def _lump_couplings(matrix: sp.csr_matrix, weak: np.ndarray) -> sp.csr_matrix:
     return (kept + sp.diags(to_diagonal)).tocsr()
 
 
+NO_NODES = np.zeros(0, dtype=bool)  # no layout yet: nothing to compare the nodes' tests with
+
+
 @compiled()
 def active_and_weak(diagonal, uniform, per_node, lumped, node_volume, node_integrals, weak_fraction,
                     active, weak, last_active, last_weak):

@@ -17,7 +17,7 @@ import numpy as np
 
 from .exclusion import _exclude_in_place
 from .ldl import small_layouts
-from .reused import KeptFactors
+from .reused import KeptFactors, RefactorRate
 from .system import _System
 
 #: largest number of active nodes for which "auto" factors the matrix
@@ -58,15 +58,50 @@ class SystemsLayout:
         direct = linear_solver == "direct" or (linear_solver == "auto" and np.count_nonzero(active) <= DIRECT_LIMIT)
         return cls(active.copy(), weak.copy(), excluded, groups, direct)
 
-    @property
-    def every_step(self) -> set:
-        """The columns of the systems factored every step (:attr:`.ldl.SymbolicLDL.every_step`)."""
-        return {columns for columns, layout in (self.small or {}).items() if layout.every_step}
+    def every_step(self, stale: bool = False) -> set:
+        """The columns of the systems factored every step (:attr:`.ldl.SymbolicLDL.every_step`; with
+        ``stale``, kept factors made again at most steps, :attr:`.ldl.SymbolicLDL.every_step_when_stale`)."""
+        return {columns for columns, layout in (self.small or {}).items()
+                if (layout.every_step_when_stale if stale else layout.every_step)}
 
-    @property
-    def every_step_when_stale(self) -> set:
-        """The same where kept factors go stale at most steps (:attr:`.ldl.SymbolicLDL.every_step_when_stale`)."""
-        return {columns for columns, layout in (self.small or {}).items() if layout.every_step_when_stale}
+
+
+@dataclass
+class RunChoices:
+    """What "auto" measured during the run and keeps to its end (and in checkpoints, so that a
+    resumed run chooses alike): whether cubic splines solve by CG on the tensor preconditioner
+    (``tensor_cg``, decided at the run's first SuperLU factorization: :data:`FILL_LIMIT`; the fill
+    moves with the points, so it is not measured again), and how often the small systems' kept
+    factors were made again (:class:`.reused.RefactorRate`)."""
+
+    tensor_cg: bool | None = None
+    rate: RefactorRate = field(default_factory=RefactorRate)
+
+    def layout(self, active: np.ndarray, weak: np.ndarray, fixed, linear_solver: str) -> SystemsLayout:
+        layout = SystemsLayout.of(active, weak, fixed, linear_solver)
+        layout.direct &= not self.tensor_cg
+        return layout
+
+    def systems(self, matrix, diagonal_index, layout: SystemsLayout, kept: KeptFactors, weak: np.ndarray,
+                keeps_factors: bool, tensor_preconditioner: bool) -> tuple[list, tuple | None, KeptFactors]:
+        """:func:`make_systems` with these choices, which it updates."""
+        every_step = self.rate.every_step
+        systems, correction, kept = make_systems(matrix, diagonal_index, layout, kept, weak, keeps_factors,
+                                                 tensor_preconditioner and self.tensor_cg is None, every_step)
+        if layout.fill is not None and self.tensor_cg is None:
+            self.tensor_cg = not layout.direct
+        on_kept = keeps_factors and layout.direct and not every_step
+        if on_kept and set(layout.small or ()) - layout.every_step():  # were the kept factors made again?
+            self.rate.observe(any(system.ldl is not None and tuple(system.columns) not in layout.every_step()
+                                  for system in systems))
+        return systems, correction, kept
+
+    def values(self) -> dict:
+        return {"refactor_rate": self.rate.values(), "tensor_cg": self.tensor_cg}
+
+    @classmethod
+    def restored(cls, values: dict) -> "RunChoices":
+        return cls(values.get("tensor_cg"), RefactorRate.restored(values.get("refactor_rate")))
 
 
 def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayout, kept: KeptFactors,
@@ -81,14 +116,15 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
     by SuperLU; factors not made every step are kept while they fit (:mod:`.reused`).  With
     ``fill_test`` (CG has the tensor preconditioner, and the run has not decided yet) SuperLU's
     factors are measured (``layout.fill``) and, above :data:`FILL_LIMIT`, the layout is solved by
-    that CG instead (not direct): the caller keeps the decision for the run, since the fill moves
-    with the points (their couplings' zeros) while the layout stays.  ``small_every_step``: the kept factors were made again too often
-    (:class:`.reused.RefactorRate`): more of the small systems are factored every step."""
+    that CG instead (not direct): :class:`RunChoices` keeps the decision for the run, since the
+    fill moves with the points (their couplings' zeros) while the layout stays.
+    ``small_every_step``: the kept factors were made again too often (:class:`.reused.RefactorRate`):
+    more of the small systems are factored every step."""
     if keeps_factors and (layout.small is None or diagonal_index is None):
         # (the scipy path's structure is its product's, of this step)
         layout.small = small_layouts(matrix, layout.excluded, layout.groups, diagonal_index, layout.small)
     excluded, small = layout.excluded, layout.small or {}
-    every_step = layout.every_step_when_stale if small_every_step else layout.every_step
+    every_step = layout.every_step(small_every_step)
     kept = KeptFactors({columns: factors for columns, factors in kept.items() if columns not in every_step})
     correction = None
     if diagonal_index is not None and len(layout.groups) == 1:
