@@ -92,6 +92,10 @@ CASES = {
     # to a factorization every step between the checkpoints, and the count towards it carries over
     "gimp consistent, refactor rate": (benchmark_block("gimp", "consistent", 1000, weak_fraction=0.1).with_overrides(
         **{"time.end": 1.4, "output.every": 5}), 15, None),
+    # the same with 1763 free nodes (SuperLU's kept factors): the run goes over to CG at step 20,
+    # between the checkpoints; the count towards it and CG's history carry over
+    "gimp consistent, refactor rate to CG": (benchmark_block("gimp", "consistent", 6400, weak_fraction=0.1).with_overrides(
+        **{"time.end": 2.0, "output.every": 10}), 20, None),
     # HRZ, a neo-Hookean body, gravity, a ramped point load and damping: the work ledger in order
     "q2 hrz, loads": (bundled_scene("cantilever_large").with_overrides(
         **{"grid.basis": "q2", "solver.mass": "hrz", "bodies.0.material.model": "neo_hookean", "time.end": 0.6,

@@ -71,8 +71,9 @@ class RunChoices:
     """What "auto" measured during the run and keeps to its end (and in checkpoints, so that a
     resumed run chooses alike): whether cubic splines solve by CG on the tensor preconditioner
     (``tensor_cg``, decided at the run's first SuperLU factorization: :data:`FILL_LIMIT`; the fill
-    moves with the points, so it is not measured again), and how often the small systems' kept
-    factors were made again (:class:`.reused.RefactorRate`)."""
+    moves with the points, so it is not measured again), and how often the kept factors were made
+    again (:class:`.reused.RefactorRate`; too often: cheap small systems are factored every step,
+    the others solved by CG, see :func:`make_systems`)."""
 
     tensor_cg: bool | None = None
     rate: RefactorRate = field(default_factory=RefactorRate)
@@ -85,15 +86,15 @@ class RunChoices:
     def systems(self, matrix, diagonal_index, layout: SystemsLayout, kept: KeptFactors, weak: np.ndarray,
                 keeps_factors: bool, tensor_preconditioner: bool) -> tuple[list, tuple | None, KeptFactors]:
         """:func:`make_systems` with these choices, which it updates."""
-        every_step = self.rate.every_step
+        stale = self.rate.stale
         systems, correction, kept = make_systems(matrix, diagonal_index, layout, kept, weak, keeps_factors,
-                                                 tensor_preconditioner and self.tensor_cg is None, every_step)
+                                                 tensor_preconditioner and self.tensor_cg is None, stale)
         if layout.fill is not None and self.tensor_cg is None:
             self.tensor_cg = not layout.direct
-        on_kept = keeps_factors and layout.direct and not every_step
-        if on_kept and set(layout.small or ()) - layout.every_step():  # were the kept factors made again?
-            self.rate.observe(any(system.ldl is not None and tuple(system.columns) not in layout.every_step()
-                                  for system in systems))
+        on_kept = keeps_factors and layout.direct and not stale
+        on_kept_factors = [system for system in systems if tuple(system.columns) not in layout.every_step()]
+        if on_kept and on_kept_factors:  # were their factors made again (this step's own L D L^T or SuperLU's)?
+            self.rate.observe(any(system.ldl is not None or system.factors is not None for system in on_kept_factors))
         return systems, correction, kept
 
     def values(self) -> dict:
@@ -106,7 +107,7 @@ class RunChoices:
 
 def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayout, kept: KeptFactors,
                  weak: np.ndarray, keeps_factors: bool, fill_test: bool = False,
-                 small_every_step: bool = False) -> tuple[list, tuple | None, KeptFactors]:
+                 stale: bool = False) -> tuple[list, tuple | None, KeptFactors]:
     """The step's systems of the assembled ``matrix``: ``(systems, correction, kept)``, the
     entries the exclusion overwrote if it was made into the one system in place, and the
     factors kept for the next steps (``kept``: those that fit the layout).
@@ -118,13 +119,20 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
     factors are measured (``layout.fill``) and, above :data:`FILL_LIMIT`, the layout is solved by
     that CG instead (not direct): :class:`RunChoices` keeps the decision for the run, since the
     fill moves with the points (their couplings' zeros) while the layout stays.
-    ``small_every_step``: the kept factors were made again too often (:class:`.reused.RefactorRate`):
-    more of the small systems are factored every step."""
+    ``stale``: the kept factors were made again at too many steps (:class:`.reused.RefactorRate`):
+    the small systems that factor cheaply are factored every step, and a layout with others
+    (SuperLU's, or small ones that factor slowly) is solved by CG instead (not direct): GIMP's
+    block, whose weak nodes change at ~40% of the steps, at 2.5e3, 5e3 and 1e4 points 1.74, 3.6
+    and 10.2 ms a step on kept factors, 1.41, 2.5 and 5.1 on CG."""
     if keeps_factors and (layout.small is None or diagonal_index is None):
         # (the scipy path's structure is its product's, of this step)
         layout.small = small_layouts(matrix, layout.excluded, layout.groups, diagonal_index, layout.small)
     excluded, small = layout.excluded, layout.small or {}
-    every_step = layout.every_step(small_every_step)
+    every_step = layout.every_step(stale)
+    if keeps_factors and stale and layout.direct and not set(layout.groups) <= every_step:
+        # the kept factors were made again at most steps and these systems cost too much to
+        # factor every step: CG (Jacobi, or the tensor preconditioner) for the rest of the run
+        layout.direct = False
     kept = KeptFactors({columns: factors for columns, factors in kept.items() if columns not in every_step})
     correction = None
     if diagonal_index is not None and len(layout.groups) == 1:
@@ -145,6 +153,8 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
             for system in systems:
                 system.factors = None
             return systems, correction, KeptFactors()
+    if not layout.direct:
+        return systems, correction, KeptFactors()
     for system in systems:
         columns = tuple(system.columns)
         if columns in small and (columns in every_step or columns not in kept):

@@ -37,41 +37,43 @@ REFACTOR_ITERATIONS = 3
 REUSED_MAX_ITERATIONS = 12
 
 
-#: steps over which :class:`RefactorRate` counts the small systems' refactorizations ...
+#: steps over which :class:`RefactorRate` counts the refactorizations of the kept factors ...
 RATE_WINDOW = 20
-#: ... and the share of them at or above which the small systems are factored every step
+#: ... and the share of them at or above which the kept factors count as stale for the run
 RATE_LIMIT = 0.4
 
 
 @dataclass
 class RefactorRate:
-    """How often the kept factors of the small systems (:mod:`.ldl`) are made again; once they
-    are in :data:`RATE_LIMIT` of :data:`RATE_WINDOW` steps (``every_step``), the small systems
-    that factor cheaply enough (:data:`.ldl.STALE_WORK`) are factored every step for the rest of
-    the run: CG's iterations on factors that keep going stale buy nothing.
+    """How often the kept factors are made again; once they are in :data:`RATE_LIMIT` of
+    :data:`RATE_WINDOW` steps (``stale``), CG's iterations on factors that keep going stale buy
+    nothing: for the rest of the run the small systems that factor cheaply enough
+    (:data:`.ldl.STALE_WORK`) are factored every step, and the others are solved by CG without
+    factors (:func:`.layout.make_systems`).
 
-    GIMP's block at 1e3 points made its kept factors again at 93 of 200 steps (a solve took more
-    than :data:`REFACTOR_ITERATIONS`, or the free nodes changed); cubic splines' at 16 of 200 and
-    q1's at 1e4 points once.  The count is of the run's steps, not of the machine's speed, and
-    it is in the checkpoint: a run and its resumption decide alike."""
+    GIMP's block made its kept factors again at 93 of 200 steps at 1e3 points, at ~85 of 200
+    from 2.5e3 to 1e4 (a solve took more than :data:`REFACTOR_ITERATIONS`, or the weak nodes
+    changed); cubic splines' at 16 of 200, q2's at 26 of 200 at 5e3 points, q1's at 1e4 points
+    once.  The count is of the run's steps, not of the machine's speed, and it is in the
+    checkpoint: a run and its resumption decide alike."""
 
     steps: int = 0
     refactors: int = 0
-    every_step: bool = False
+    stale: bool = False
 
     def observe(self, refactored: bool) -> None:
-        """One step of small systems on kept factors, whether they were made again."""
-        if self.every_step:
+        """One step of systems on kept factors, whether they were made again."""
+        if self.stale:
             return
         self.steps += 1
         self.refactors += bool(refactored)
         if self.steps == RATE_WINDOW:
-            self.every_step = self.refactors >= RATE_LIMIT * RATE_WINDOW
+            self.stale = self.refactors >= RATE_LIMIT * RATE_WINDOW
             self.steps, self.refactors = 0, 0
 
     def values(self) -> list:
         """A checkpoint's values (:meth:`restored`)."""
-        return [self.steps, self.refactors, self.every_step]
+        return [self.steps, self.refactors, self.stale]
 
     @classmethod
     def restored(cls, values: list | None) -> "RefactorRate":
