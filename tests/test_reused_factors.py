@@ -181,26 +181,30 @@ def test_refactor_rate_switches_at_its_limit():
     assert RefactorRate.restored(below.values()) == below and RefactorRate.restored(None) == RefactorRate()
 
 
-def test_small_systems_whose_kept_factors_go_stale_are_factored_every_step(monkeypatch):
-    """GIMP's block at 1e3 points (weak_fraction 0.1, as benchmarked) remakes its kept factors at most
-    steps: within two windows the small system is factored every step (its own factors, none kept),
-    and the run stays within 1e-4 of the largest velocity of the direct solver's; cubic splines'
-    factors last, and stay kept."""
-    monkeypatch.setattr(ldl, "EVERY_STEP_NODES", 1500)  # the fixture's 0 would leave no small system
-    settings = {"solver.weak_fraction": 0.1}
+def gimp_block_against_direct() -> Simulation:
+    """GIMP's block at 1e3 points (weak_fraction 0.1, as benchmarked) after two windows of the
+    refactor rate with "auto", checked within 1e-4 of the largest velocity of the direct solver's."""
     runs = {}
     for solver in ("direct", "auto"):
         simulation = Simulation(benchmark_block("gimp", "consistent", 1000).with_overrides(
-            **settings, **{"solver.linear_solver": solver}))
+            **{"solver.weak_fraction": 0.1, "solver.linear_solver": solver}))
         for _ in range(2 * RATE_WINDOW + 5):
             simulation.advance()
         runs[solver] = simulation
-    mass = runs["auto"].mass
+    scale = np.abs(runs["direct"].particles.v).max()
+    assert np.abs(runs["auto"].particles.v - runs["direct"].particles.v).max() <= 1e-4 * scale
+    return runs["auto"]
+
+
+def test_small_systems_whose_kept_factors_go_stale_are_factored_every_step(monkeypatch):
+    """GIMP's block at 1e3 points remakes its kept factors at most steps: within two windows the small
+    system is factored every step (its own factors, none kept), and the run stays within 1e-4 of the
+    direct solver's; cubic splines' factors last, and stay kept."""
+    monkeypatch.setattr(ldl, "EVERY_STEP_NODES", 1500)  # the fixture's 0 would leave no small system
+    mass = gimp_block_against_direct().mass
     assert mass._choices.rate.stale
     system = mass._systems[0]
     assert system.ldl is not None and system.kept is None and not mass._kept
-    scale = np.abs(runs["direct"].particles.v).max()
-    assert np.abs(runs["auto"].particles.v - runs["direct"].particles.v).max() <= 1e-4 * scale
     splines = advanced("bspline3", "auto", 2 * RATE_WINDOW + 5, n=1000)
     assert not splines.mass._choices.rate.stale and splines.mass._systems[0].kept is not None
 
@@ -210,19 +214,9 @@ def test_large_systems_whose_kept_factors_go_stale_solve_by_cg():
     steps, cost too much to make every step; within two windows the run solves by CG (no factors,
     none kept; GIMP's block at 1e4 points 10.2 -> 5.1 ms a step) and stays within 1e-4 of the
     largest velocity of the direct solver's.  q1's factors last: they stay kept."""
-    settings = {"solver.weak_fraction": 0.1}
-    runs = {}
-    for solver in ("direct", "auto"):
-        simulation = Simulation(benchmark_block("gimp", "consistent", 1000).with_overrides(
-            **settings, **{"solver.linear_solver": solver}))
-        for _ in range(2 * RATE_WINDOW + 5):
-            simulation.advance()
-        runs[solver] = simulation
-    mass = runs["auto"].mass
+    mass = gimp_block_against_direct().mass
     assert mass._choices.rate.stale and not mass._direct and not mass._kept
     assert all(system.factors is None and system.ldl is None for system in mass._systems)
-    scale = np.abs(runs["direct"].particles.v).max()
-    assert np.abs(runs["auto"].particles.v - runs["direct"].particles.v).max() <= 1e-4 * scale
     lasting = advanced("q1", "auto", 2 * RATE_WINDOW + 5, n=1000)
     assert not lasting.mass._choices.rate.stale and lasting.mass._direct
     assert lasting.mass._systems[0].kept is not None
