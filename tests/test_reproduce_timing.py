@@ -22,26 +22,43 @@ def cache_at(monkeypatch):
     compiled.note_compilation.cache_clear()
 
 
-def test_a_cold_cache_is_announced_once(tmp_path, cache_at, capsys):
+def compile_a_library_function(name: str):
+    """numba compiles a function of the library's package (not cached: it compiles every time)."""
+    import numba
+
+    def function(x):
+        return x + 1
+
+    function.__module__, function.__qualname__ = f"femgrid_mpm.{name}", name
+    return numba.njit(cache=False)(function)(1)
+
+
+def test_a_cold_cache_is_announced_once_when_a_kernel_compiles(tmp_path, cache_at, caplog):
     cache_at(tmp_path)  # empty: nothing compiled yet
-    path = tmp_path / "bar.toml"
-    path.write_text(helpers_scene_text())
-    code, _, err = helpers.run_cli(["info", path], capsys)
-    assert code == 0
-    notes = [line for line in err.splitlines() if line.startswith("femgrid-mpm: note: compiling the numba kernels")]
+    with caplog.at_level("INFO", logger="femgrid_mpm"):
+        compile_a_library_function("first")
+        compile_a_library_function("second")  # the same process: said once
+    notes = [record.getMessage() for record in caplog.records if "compiling the numba kernels" in record.getMessage()]
     assert len(notes) == 1 and "only once" in notes[0] and str(tmp_path) in notes[0]
-    code, _, err = helpers.run_cli(["info", path], capsys)  # the same process: said once
-    assert "compiling" not in err
 
 
-def test_a_warm_cache_says_nothing(tmp_path, cache_at, capsys):
-    (tmp_path / "kernels").mkdir()
-    (tmp_path / "kernels" / "g2p.local_g2p-59.py311.nbi").write_bytes(b"")
+def test_a_command_that_compiles_nothing_says_nothing(tmp_path, cache_at, capsys):
+    """``info`` builds the simulation and estimates its step with no kernel: no note, even on a
+    cold cache (it said it was compiling for a minute and ended in a second)."""
     cache_at(tmp_path)
     path = tmp_path / "bar.toml"
     path.write_text(helpers_scene_text())
     code, _, err = helpers.run_cli(["info", path], capsys)
     assert code == 0 and "compiling" not in err
+
+
+def test_a_warm_cache_says_nothing(tmp_path, cache_at, caplog):
+    (tmp_path / "kernels").mkdir()
+    (tmp_path / "kernels" / "g2p.local_g2p-59.py311.nbi").write_bytes(b"")
+    cache_at(tmp_path)
+    with caplog.at_level("INFO", logger="femgrid_mpm"):
+        compile_a_library_function("warm")
+    assert not any("compiling" in record.getMessage() for record in caplog.records)
 
 
 def test_no_writable_cache_is_announced_as_compiling_every_time(cache_at):

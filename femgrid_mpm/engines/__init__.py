@@ -11,7 +11,6 @@
 
 from __future__ import annotations
 
-from ..kernels.compiled import note_compilation
 from .engine import Engine
 from .numba_engine import CompiledTransfer
 from .reconstructed import ReconstructedForce, ReconstructedMass
@@ -25,11 +24,9 @@ __all__ = ["ENGINES", "CompiledTransfer", "Engine", "PerBodyTransfer", "Reconstr
 
 def engine_for(simulation) -> Engine:
     """The engine of a simulation: the scene's, or the per-body one for a mass model with
-    one field per body (which only the scipy algebra implements).  The first in a process
-    whose kernel cache is cold says that they are being compiled (:func:`note_compilation`);
+    one field per body (which only the scipy algebra implements);
     wrapped in :class:`ReconstructedForce` for ``force_quadrature = "reconstructed"`` and in
     :class:`ReconstructedMass` for ``mass_quadrature = "reconstructed"``."""
-    note_compilation()
     if simulation.mass.assembly.per_body:
         return PerBodyTransfer(simulation)
     engine = ENGINES[simulation.scene.solver.engine](simulation)

@@ -30,7 +30,8 @@ each other's entries.
 
 A first use compiles for about a minute: :func:`note_compilation` says so
 once, on the ``femgrid_mpm`` logger (INFO, which the command line shows as one
-line), when the tree's cache holds no kernel yet.
+line), when numba starts compiling one of the library's functions and the tree's
+cache holds no kernel yet.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ import warnings
 from pathlib import Path
 
 import numba
+from numba.core import event as numba_event
 from numba.core.caching import IndexDataCacheFile
 
 try:
@@ -100,7 +102,9 @@ def cache_is_cold(directory: Path | None) -> bool:
 @functools.lru_cache(maxsize=None)
 def note_compilation() -> bool:
     """Once per process: log that the kernels are about to be compiled if this tree's
-    cache is cold (:func:`cache_is_cold`); returns whether it did."""
+    cache is cold (:func:`cache_is_cold`); returns whether it did.  Called when numba starts
+    compiling one of this library's functions (:class:`FirstCompilation`), so a command that
+    compiles nothing (``femgrid-mpm info``) says nothing."""
     directory = cache_directory(LIBRARY)
     if not cache_is_cold(directory):
         return False
@@ -109,6 +113,23 @@ def note_compilation() -> bool:
     logging.getLogger("femgrid_mpm").info(
         "compiling the numba kernels, about a minute on first use (only once: %s)", where)
     return True
+
+
+class FirstCompilation(numba_event.Listener):
+    """numba's ``"numba:compile"`` event (broadcast on a cache miss, when a dispatcher starts
+    compiling) for this library's functions: :func:`note_compilation`.  Loading a cached
+    kernel broadcasts nothing."""
+
+    def on_start(self, event) -> None:
+        module = event.data["dispatcher"].py_func.__module__ or ""  # None for numba's generated functions
+        if module.startswith(f"{LIBRARY.name}."):
+            note_compilation()
+
+    def on_end(self, event) -> None:
+        pass
+
+
+numba_event.register("numba:compile", FirstCompilation())
 
 
 def _writable(directory: Path) -> bool:
