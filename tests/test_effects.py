@@ -58,15 +58,17 @@ def test_mass_damping_decays_by_one_minus_c_dt_per_step(block_scene):
 
 def test_point_load_impulse_with_ramp(block_scene):
     """Sum over nodes of m_i a_i is the total force (internal forces sum to zero): the
-    body's momentum is the impulse, the left sum dt F sum_k min(1, k dt / t_ramp) of
-    the force at each step's start time (0.145 F here; the integral would be 0.15 F)."""
+    body's momentum is the impulse, the right sum dt F sum_k min(1, k dt / t_ramp) of
+    the force at each step's force time t + dt, the stress's instant (0.155 F here; the
+    integral is 0.15 F, which the paper's step reaches at t + dt / 2: its velocities are
+    those of the half step; the force at the step's start gave 0.145 F)."""
     force, ramp = np.array([3.0, -2.0]), 0.1
     load = {"kind": "point", "body": "block", "at": [1.75, 1.5], "force": list(force), "ramp": ramp}
     simulation = Simulation(block_scene(velocity=(0.0, 0.0), end=0.2, loads=[load]))
     result = simulation.run()
     dt = simulation.dt
-    impulse = force * dt * sum(min(1.0, k * dt / ramp) for k in range(simulation.step_index))
-    np.testing.assert_allclose(impulse, 0.145 * force, rtol=1e-12)
+    impulse = force * dt * sum(min(1.0, k * dt / ramp) for k in range(1, simulation.step_index + 1))
+    np.testing.assert_allclose(impulse, 0.155 * force, rtol=1e-12)
     # round-off of the internal forces' sum, relative to the impulse
     np.testing.assert_allclose(momentum(result.particles), impulse, rtol=1e-10, atol=1e-12 * abs(force).max())
 

@@ -83,7 +83,8 @@ def test_point_load_changes_momentum_by_its_impulse():
 
 
 def test_point_load_ramp():
-    """A ramp to full force at t_r: impulse F t^2 / (2 t_r) before t_r (discrete sum)."""
+    """A ramp to full force at t_r: the discrete sum of the force at each step's force time
+    t + dt (F t^2 / (2 t_r) is the integral, before t_r)."""
     force = np.array([0.0, -4.0])
     scene = block_scene(
         velocity=(0.0, 0.0),
@@ -92,8 +93,23 @@ def test_point_load_ramp():
     )
     result = Simulation(scene).run()
     momentum = (result.particles.mass[:, None] * result.particles.v).sum(axis=0)
-    impulse = force * 0.01 * sum(k * 0.01 / 1.0 for k in range(50))
+    impulse = force * 0.01 * sum(k * 0.01 / 1.0 for k in range(1, 51))
     np.testing.assert_allclose(momentum, impulse, rtol=1e-10, atol=1e-14)
+
+
+def test_point_load_ramp_with_the_centred_step_is_its_integral():
+    """The centred step's half kicks at the start and end make the impulse the trapezoidal
+    sum of the force at the step's instants, exact for a linear ramp: momentum F T^2 / (2 t_r)
+    at the end time T (the ramp read a step late gave F T (T - dt) / (2 t_r))."""
+    force = np.array([0.0, -4.0])
+    scene = block_scene(
+        velocity=(0.0, 0.0),
+        end=0.5,
+        loads=[{"kind": "point", "body": "block", "at": [1.0, 1.0], "force": list(force), "ramp": 1.0}],
+    ).with_overrides(**{"solver.scheme": "centred"})
+    result = Simulation(scene).run()
+    momentum = (result.particles.mass[:, None] * result.particles.v).sum(axis=0)
+    np.testing.assert_allclose(momentum, force * 0.5**2 / 2.0, rtol=1e-10, atol=1e-14)
 
 
 def test_paper_eq35_point_load_applies_force_times_mass_fraction():

@@ -28,7 +28,8 @@ class PointLoad(Effect):
         Full force (N per unit thickness).
     ramp : float
         The force grows linearly from zero to full at this time (s), then is
-        held; 0 applies it at once.
+        held; 0 applies it at once.  Taken at the instant of the step's forces
+        (``ctx.force_time``, t + dt with the stress of t + dt), as a body force is.
     model : {"force", "paper_eq35"}
         ``"force"``: the point receives ``force``.  ``"paper_eq35"``: the
         paper's Eq. 35, an acceleration ``b = force / m_p * m_p / m_tot`` of
@@ -58,7 +59,8 @@ class PointLoad(Effect):
         self_name = f"{self.name}:{self.body}"
 
         def add_point_load(ctx: StepContext) -> None:
-            scale = 1.0 if self.ramp == 0 else min(1.0, ctx.time / self.ramp)
+            # the ramp at the forces' instant (t + dt in the step, as the stress's: see BodyForce)
+            scale = 1.0 if self.ramp == 0 else min(1.0, ctx.force_time / self.ramp)
             ctx.add_point_forces(self_name, scale * force[None, :], points=np.array([point]))
 
         add_point_load.point = point  # type: ignore[attr-defined]
