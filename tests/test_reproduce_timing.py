@@ -125,3 +125,20 @@ def test_the_warm_up_takes_one_tiny_step(monkeypatch):
     monkeypatch.setattr(timing.Simulation, "run", counting)
     timing.warm_kernels(bundled_scene("vibrating_bar"))
     assert steps == [(1, timing.WARM_STEP)]
+
+
+def test_a_note_during_a_progress_bar_has_a_line_of_its_own(monkeypatch):
+    """The kernels compile in the first step, after the run's bar is drawn: the note clears the
+    bar's line first (it was written after the bar's text) and the bar is drawn again below."""
+    import io
+
+    from femgrid_mpm.cli.parser import say
+
+    err = io.StringIO()
+    monkeypatch.setattr("sys.stderr", err)
+    bar, count = runs_bar(10, enabled=True)
+    count("bar q1")
+    say("note", "compiling the numba kernels")
+    before, after = err.getvalue().split("femgrid-mpm: note: compiling the numba kernels\n")
+    bar.close()
+    assert "runs" in before and before.endswith("\r") and "1/10" in after

@@ -13,6 +13,7 @@ import scipy.sparse.linalg as spla
 from femgrid_mpm.mass import layout, ldl
 from femgrid_mpm.mass.direct import _factor
 from femgrid_mpm.mass.reused import RATE_LIMIT, RATE_WINDOW, REFACTOR_ITERATIONS, RefactorRate, ReusedFactors
+from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
 from helpers import advanced_benchmark_block, benchmark_block
 
@@ -181,14 +182,13 @@ def test_refactor_rate_switches_at_its_limit():
     assert RefactorRate.restored(below.values()) == below and RefactorRate.restored(None) == RefactorRate()
 
 
-def gimp_block_against_direct() -> Simulation:
-    """GIMP's block at 1e3 points (weak_fraction 0.1, as benchmarked) after two windows of the
-    refactor rate with "auto", checked within 1e-4 of the largest velocity of the direct solver's."""
+def against_direct(scene, windows: int = 2) -> Simulation:
+    """The scene after ``windows`` windows of the refactor rate with "auto", checked within 1e-4 of
+    the largest velocity of the direct solver's."""
     runs = {}
     for solver in ("direct", "auto"):
-        simulation = Simulation(benchmark_block("gimp", "consistent", 1000).with_overrides(
-            **{"solver.weak_fraction": 0.1, "solver.linear_solver": solver}))
-        for _ in range(2 * RATE_WINDOW + 5):
+        simulation = Simulation(scene.with_overrides(**{"solver.linear_solver": solver}))
+        for _ in range(windows * RATE_WINDOW + 5):
             simulation.advance()
         runs[solver] = simulation
     scale = np.abs(runs["direct"].particles.v).max()
@@ -196,12 +196,15 @@ def gimp_block_against_direct() -> Simulation:
     return runs["auto"]
 
 
+GIMP_BLOCK = benchmark_block("gimp", "consistent", 1000).with_overrides(**{"solver.weak_fraction": 0.1})
+
+
 def test_small_systems_whose_kept_factors_go_stale_are_factored_every_step(monkeypatch):
     """GIMP's block at 1e3 points remakes its kept factors at most steps: within two windows the small
     system is factored every step (its own factors, none kept), and the run stays within 1e-4 of the
     direct solver's; cubic splines' factors last, and stay kept."""
     monkeypatch.setattr(ldl, "EVERY_STEP_NODES", 1500)  # the fixture's 0 would leave no small system
-    mass = gimp_block_against_direct().mass
+    mass = against_direct(GIMP_BLOCK).mass
     assert mass._choices.rate.stale
     system = mass._systems[0]
     assert system.ldl is not None and system.kept is None and not mass._kept
@@ -212,11 +215,28 @@ def test_small_systems_whose_kept_factors_go_stale_are_factored_every_step(monke
 def test_large_systems_whose_kept_factors_go_stale_solve_by_cg():
     """The same block with no small system (the fixture): its SuperLU factors, made again at most
     steps, cost too much to make every step; within two windows the run solves by CG (no factors,
-    none kept; GIMP's block at 1e4 points 10.2 -> 5.1 ms a step) and stays within 1e-4 of the
-    largest velocity of the direct solver's.  q1's factors last: they stay kept."""
-    mass = gimp_block_against_direct().mass
-    assert mass._choices.rate.stale and not mass._direct and not mass._kept
+    none kept; GIMP's block at 1e4 points 13.2 -> 4.8 ms a step), which after a third takes fewer
+    iterations a solve than the factors' limit (CgTrial) and stays, within 1e-4 of the largest
+    velocity of the direct solver's.  q1's factors last: they stay kept."""
+    mass = against_direct(GIMP_BLOCK, windows=3).mass
+    trial = mass._choices.trial
+    assert mass._choices.rate.stale and not mass._direct and not mass._kept and trial.verdict is True
+    assert trial.fill > 1 and trial.steps == RATE_WINDOW
     assert all(system.factors is None and system.ldl is None for system in mass._systems)
     lasting = advanced("q1", "auto", 2 * RATE_WINDOW + 5, n=1000)
     assert not lasting.mass._choices.rate.stale and lasting.mass._direct
     assert lasting.mass._systems[0].kept is not None
+
+
+def test_stale_cg_that_costs_more_than_the_factors_goes_back_to_them():
+    """Quadratic splines on the drifting bar (h = 0.125, 374 free nodes, SuperLU by the fixture):
+    their kept factors go stale, CG takes more iterations a solve than the factors' limit in its
+    trial window (on the bar at h = 0.04 109 a solve, 47 against 21 ms a step), and the run goes
+    back to kept factors for good, within 1e-4 of the direct solver's."""
+    scene = bundled_scene("drifting_bar").with_overrides(**{
+        "grid.basis": "bspline2", "grid.spacing": 0.125, "solver.mass": "consistent", "solver.weak_fraction": 0.1,
+        "solver.negative_mass": "warn", "solver.consistent_fallback": "blend"})
+    mass = against_direct(scene, windows=3).mass
+    trial = mass._choices.trial
+    assert mass._choices.rate.stale and trial.verdict is False and mass._direct and mass._kept
+    assert mass.iterations - trial.start > trial.limit() * RATE_WINDOW * 2

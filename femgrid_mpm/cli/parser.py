@@ -175,9 +175,14 @@ def emit(text: str) -> None:
 
 
 def say(kind: str, message: str) -> None:
-    """One line on stderr: ``femgrid-mpm: KIND: message`` (nothing if stderr cannot be written)."""
+    """One line on stderr: ``femgrid-mpm: KIND: message`` (nothing if stderr cannot be written);
+    a progress bar drawn there is cleared first and drawn again below (a note given while the
+    first step compiles the kernels landed on the bar's line)."""
+    from tqdm import tqdm
+
     try:
-        print(f"{PROG}: {kind}: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+        with tqdm.external_write_mode(file=sys.stderr):
+            print(f"{PROG}: {kind}: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
     except OSError:
         discard(sys.stderr)
 

@@ -212,9 +212,9 @@ class ConsistentMass(MassModel):
             kept = self._kept.fitting(self._layout.groups, self._layout.excluded, self._weak)
         else:  # kept over an unchanged layout, the factors were made for it
             kept = self._kept.fresh(self._layout.groups)
-        self._direct = self._layout.direct  # (_keeps_factors reads it; the choices may change the layout's)
         self._systems, self._correction, kept = self._choices.systems(
-            matrix, diagonal_index, self._layout, kept, self._weak, self._keeps_factors, self.preconditioner is not None)
+            matrix, diagonal_index, self._layout, kept, self._weak, self.linear_solver == "auto",
+            self.preconditioner is not None, self.iterations)  # (the choices may change the layout's direct)
         self._direct = self._layout.direct
         self._kept = kept if self._keeps_factors else KeptFactors()
 

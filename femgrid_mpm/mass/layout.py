@@ -17,7 +17,7 @@ import numpy as np
 
 from .exclusion import _exclude_in_place
 from .ldl import small_layouts
-from .reused import KeptFactors, RefactorRate
+from .reused import RATE_WINDOW, REFACTOR_ITERATIONS, KeptFactors, RefactorRate
 from .system import _System
 
 #: largest number of active nodes for which "auto" factors the matrix
@@ -48,6 +48,7 @@ class SystemsLayout:
     direct: bool
     small: dict | None = None  # {columns: SymbolicLDL}; None: not analysed yet
     fill: float | None = None  # SuperLU's fill, where make_systems measured it (:func:`_fill`)
+    stale_cg: bool = False  # solved by CG because the kept factors went stale (make_systems)
     edges: dict = field(default_factory=dict)  # {columns: SymbolicLDL or None} (.singular)
 
     @classmethod
@@ -67,16 +68,61 @@ class SystemsLayout:
 
 
 @dataclass
+class CgTrial:
+    """Whether CG, taken because the kept factors went stale (:func:`make_systems`), is cheaper
+    than they were: over its first :data:`.reused.RATE_WINDOW` steps, CG may take at most as many
+    iterations a solve as the kept factors cost at their most in products with the matrix
+    (:data:`.reused.REFACTOR_ITERATIONS` + 1 solves with factors holding ``fill`` entries per
+    matrix entry, and as many products less one), their remaking not counted; more, and the run
+    goes back to kept factors for good.  The drifting bar at h = 0.04 (2,200-2,900 free nodes),
+    CG's iterations a solve against the limit: quadratic splines 109 against 36 (47 against 21
+    ms a step on kept factors), open-knot 55 against 22, q1 23 against 20 (7.6 against 7.3 ms),
+    gimp 24 against 21.5 (13.7 against 16.0 ms: the remaking left out, CG's gain here is not
+    taken); gimp's block at 1e4 points 6.6 against 19 (4.8 against 13.2 ms), which stays on CG."""
+
+    fill: float = 0.0  # entries of the last kept factors per entry of their matrix
+    start: int | None = None  # the mass's CG iterations when the trial began (None: not begun)
+    steps: int = 0
+    verdict: bool | None = None  # True: CG for the rest of the run; False: kept factors
+
+    def limit(self) -> float:
+        """CG's iterations a solve at which it costs what the kept factors did at their most."""
+        return (REFACTOR_ITERATIONS + 1) * self.fill + REFACTOR_ITERATIONS
+
+    def begin(self, iterations: int) -> None:
+        """A step on stale CG with the mass's CG iterations so far: the trial's first, if not begun."""
+        if self.start is None:
+            self.start = iterations
+
+    def observe(self, iterations: int, solves_per_step: int) -> None:
+        """At a step's start, once begun: the mass's CG iterations so far."""
+        if self.start is None or self.verdict is not None:
+            return
+        self.steps += 1
+        if self.steps == RATE_WINDOW:
+            self.verdict = bool(iterations - self.start <= self.limit() * RATE_WINDOW * solves_per_step)
+
+    def values(self) -> list:
+        return [self.fill, self.start, self.steps, self.verdict]
+
+    @classmethod
+    def restored(cls, values: list | None) -> "CgTrial":
+        return cls() if values is None else cls(float(values[0]), None if values[1] is None else int(values[1]),
+                                                int(values[2]), None if values[3] is None else bool(values[3]))
+
+
+@dataclass
 class RunChoices:
     """What "auto" measured during the run and keeps to its end (and in checkpoints, so that a
     resumed run chooses alike): whether cubic splines solve by CG on the tensor preconditioner
     (``tensor_cg``, decided at the run's first SuperLU factorization: :data:`FILL_LIMIT`; the fill
-    moves with the points, so it is not measured again), and how often the kept factors were made
+    moves with the points, so it is not measured again), how often the kept factors were made
     again (:class:`.reused.RefactorRate`; too often: cheap small systems are factored every step,
-    the others solved by CG, see :func:`make_systems`)."""
+    the others solved by CG, see :func:`make_systems`) and whether that CG pays (:class:`CgTrial`)."""
 
     tensor_cg: bool | None = None
     rate: RefactorRate = field(default_factory=RefactorRate)
+    trial: CgTrial = field(default_factory=CgTrial)
 
     def layout(self, active: np.ndarray, weak: np.ndarray, fixed, linear_solver: str) -> SystemsLayout:
         layout = SystemsLayout.of(active, weak, fixed, linear_solver)
@@ -84,30 +130,43 @@ class RunChoices:
         return layout
 
     def systems(self, matrix, diagonal_index, layout: SystemsLayout, kept: KeptFactors, weak: np.ndarray,
-                keeps_factors: bool, tensor_preconditioner: bool) -> tuple[list, tuple | None, KeptFactors]:
-        """:func:`make_systems` with these choices, which it updates."""
+                auto: bool, tensor_preconditioner: bool, iterations: int) -> tuple[list, tuple | None, KeptFactors]:
+        """:func:`make_systems` with these choices, which it updates (``auto``: ``linear_solver``
+        is "auto"; ``iterations``: the mass's CG iterations so far)."""
         stale = self.rate.stale
+        self.trial.observe(iterations, 2 * len(layout.groups))  # velocity and acceleration
+        if layout.stale_cg and self.trial.verdict is False:  # CG took more than the kept factors did
+            layout.direct, layout.stale_cg = True, False
+        keeps_factors = auto and layout.direct
         systems, correction, kept = make_systems(matrix, diagonal_index, layout, kept, weak, keeps_factors,
-                                                 tensor_preconditioner and self.tensor_cg is None, stale)
+                                                 tensor_preconditioner and self.tensor_cg is None, stale,
+                                                 cg_when_stale=self.trial.verdict is not False)
+        if layout.stale_cg:
+            self.trial.begin(iterations)
         if layout.fill is not None and self.tensor_cg is None:
             self.tensor_cg = not layout.direct
         on_kept = keeps_factors and layout.direct and not stale
         on_kept_factors = [system for system in systems if tuple(system.columns) not in layout.every_step()]
         if on_kept and on_kept_factors:  # were their factors made again (this step's own L D L^T or SuperLU's)?
             self.rate.observe(any(system.ldl is not None or system.factors is not None for system in on_kept_factors))
+        if keeps_factors and layout.direct:  # the fill of factors made this step, for the trial's limit
+            for system in on_kept_factors:
+                if system.kept is None and tuple(system.columns) in kept:
+                    self.trial.fill = kept[tuple(system.columns)].entries / max(int(np.count_nonzero(system.matrix.data)), 1)
         return systems, correction, kept
 
     def values(self) -> dict:
-        return {"refactor_rate": self.rate.values(), "tensor_cg": self.tensor_cg}
+        return {"refactor_rate": self.rate.values(), "tensor_cg": self.tensor_cg, "cg_trial": self.trial.values()}
 
     @classmethod
     def restored(cls, values: dict) -> "RunChoices":
-        return cls(values.get("tensor_cg"), RefactorRate.restored(values.get("refactor_rate")))
+        return cls(values.get("tensor_cg"), RefactorRate.restored(values.get("refactor_rate")),
+                   CgTrial.restored(values.get("cg_trial")))
 
 
 def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayout, kept: KeptFactors,
                  weak: np.ndarray, keeps_factors: bool, fill_test: bool = False,
-                 stale: bool = False) -> tuple[list, tuple | None, KeptFactors]:
+                 stale: bool = False, cg_when_stale: bool = True) -> tuple[list, tuple | None, KeptFactors]:
     """The step's systems of the assembled ``matrix``: ``(systems, correction, kept)``, the
     entries the exclusion overwrote if it was made into the one system in place, and the
     factors kept for the next steps (``kept``: those that fit the layout).
@@ -121,18 +180,20 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
     fill moves with the points (their couplings' zeros) while the layout stays.
     ``stale``: the kept factors were made again at too many steps (:class:`.reused.RefactorRate`):
     the small systems that factor cheaply are factored every step, and a layout with others
-    (SuperLU's, or small ones that factor slowly) is solved by CG instead (not direct): GIMP's
-    block, whose weak nodes change at ~40% of the steps, at 2.5e3, 5e3 and 1e4 points 1.74, 3.6
-    and 10.2 ms a step on kept factors, 1.41, 2.5 and 5.1 on CG."""
+    (SuperLU's, or small ones that factor slowly) is solved by CG instead (not direct) unless
+    ``cg_when_stale`` is False (:class:`CgTrial` found CG dearer).  GIMP's block, whose solves on
+    kept factors took more than :data:`.reused.REFACTOR_ITERATIONS` iterations at ~45% of the
+    steps, at 2.5e3 and 5e3 points (small systems that factor slowly) 1.74 and 3.6 ms a step on
+    kept factors, 1.41 and 2.5-2.9 on CG; at 1e4 (SuperLU's) 10.2-13.2 against 4.8-5.1."""
     if keeps_factors and (layout.small is None or diagonal_index is None):
         # (the scipy path's structure is its product's, of this step)
         layout.small = small_layouts(matrix, layout.excluded, layout.groups, diagonal_index, layout.small)
     excluded, small = layout.excluded, layout.small or {}
     every_step = layout.every_step(stale)
-    if keeps_factors and stale and layout.direct and not set(layout.groups) <= every_step:
+    if keeps_factors and stale and cg_when_stale and layout.direct and not set(layout.groups) <= every_step:
         # the kept factors were made again at most steps and these systems cost too much to
-        # factor every step: CG (Jacobi, or the tensor preconditioner) for the rest of the run
-        layout.direct = False
+        # factor every step: CG (Jacobi, or the tensor preconditioner), while it pays (CgTrial)
+        layout.direct, layout.stale_cg = False, True
     kept = KeptFactors({columns: factors for columns, factors in kept.items() if columns not in every_step})
     correction = None
     if diagonal_index is not None and len(layout.groups) == 1:

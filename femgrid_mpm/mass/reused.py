@@ -125,6 +125,11 @@ class ReusedFactors:
         return cls(lower, _scaled_transpose(*lower, diagonal), diagonal, position, position.copy(), excluded.copy(),
                    weak.copy(), tuple(columns))
 
+    @property
+    def entries(self) -> int:
+        """Entries of both factors, diagonal included (the work of a solve with them, per column)."""
+        return len(self.lower[1]) + len(self.upper[1]) + len(self.upper_diagonal)
+
     def arrays(self) -> dict:
         """The factors as named arrays (a checkpoint's; :meth:`from_arrays` takes them back)."""
         names = ("indptr", "indices", "data")
