@@ -333,3 +333,25 @@ def test_cubic_splines_choice_of_tensor_cg_carries_over(tmp_path, monkeypatch):
     resumed_simulation, resumed = interrupted_then_resumed(scene, tmp_path, 10, stop_after=2)
     assert resumed_simulation.mass._choices.tensor_cg
     assert_same_run(resumed, reference)
+
+
+def test_a_checkpoint_without_the_cg_trial_measures_the_fill_from_its_kept_factors():
+    """A checkpoint written before the CG trial was kept (no ``cg_trial``), taken at step 19 of the
+    gimp block at 6400 points, whose kept factors go stale at step 20: the resumed run measures the
+    fill from the factors it restored and reaches the uninterrupted run's verdict (CG stays, about 7
+    iterations a solve against a limit of 17); with the fill left at zero, the limit was 3 and CG
+    was given up for good."""
+    scene = benchmark_block("gimp", "consistent", 6400, weak_fraction=0.1).with_overrides(**{"time.end": 2.0})
+    reference, interrupted = Simulation(scene), Simulation(scene)
+    for _ in range(19):
+        interrupted.advance()
+    arrays, values = interrupted.state()
+    del values["mass"]["cg_trial"]
+    resumed = Simulation(scene)
+    resumed.restore(arrays, values)
+    for simulation in (reference, resumed):
+        while simulation.step_index < 45:
+            simulation.advance()
+    assert reference.mass._choices.trial.verdict is True
+    assert resumed.mass._choices.trial.verdict is True and resumed.mass._choices.trial.fill > 1
+    assert not resumed.mass._direct

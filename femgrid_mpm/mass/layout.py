@@ -76,7 +76,7 @@ class CgTrial:
     matrix entry, and as many products less one), their remaking not counted; more, and the run
     goes back to kept factors for good.  The drifting bar at h = 0.04 (2,200-2,900 free nodes),
     CG's iterations a solve against the limit: quadratic splines 109 against 36 (47 against 21
-    ms a step on kept factors), open-knot 55 against 22, q1 23 against 20 (7.6 against 7.3 ms),
+    ms a step on kept factors), open-knot 55 against 22, q1 23-33 against 20 (7.6 against 7.3 ms),
     gimp 24 against 21.5 (13.7 against 16.0 ms: the remaking left out, CG's gain here is not
     taken); gimp's block at 1e4 points 6.6 against 19 (4.8 against 13.2 ms), which stays on CG."""
 
@@ -99,8 +99,8 @@ class CgTrial:
         if self.start is None or self.verdict is not None:
             return
         self.steps += 1
-        if self.steps == RATE_WINDOW:
-            self.verdict = bool(iterations - self.start <= self.limit() * RATE_WINDOW * solves_per_step)
+        if self.steps == RATE_WINDOW:  # (no fill measured, no limit: CG stays)
+            self.verdict = bool(not self.fill or iterations - self.start <= self.limit() * RATE_WINDOW * solves_per_step)
 
     def values(self) -> list:
         return [self.fill, self.start, self.steps, self.verdict]
@@ -149,10 +149,11 @@ class RunChoices:
         on_kept_factors = [system for system in systems if tuple(system.columns) not in layout.every_step()]
         if on_kept and on_kept_factors:  # were their factors made again (this step's own L D L^T or SuperLU's)?
             self.rate.observe(any(system.ldl is not None or system.factors is not None for system in on_kept_factors))
-        if keeps_factors and layout.direct:  # the fill of factors made this step, for the trial's limit
-            for system in on_kept_factors:
-                if system.kept is None and tuple(system.columns) in kept:
-                    self.trial.fill = kept[tuple(system.columns)].entries / max(int(np.count_nonzero(system.matrix.data)), 1)
+        if keeps_factors and layout.direct:  # the fill of the factors made this step, for the trial's limit
+            for system in on_kept_factors:  # (or of those kept, where none was measured: a checkpoint without it)
+                factors = kept.get(tuple(system.columns)) if system.kept is None else system.kept
+                if factors is not None and (system.kept is None or not self.trial.fill):
+                    self.trial.fill = factors.entries / max(int(np.count_nonzero(system.matrix.data)), 1)
         return systems, correction, kept
 
     def values(self) -> dict:
