@@ -25,6 +25,7 @@ from typing import Callable
 import numpy as np
 
 from .diagnostics import (EnergyGuard, NegativeMassMonitor, SimulationStopped, fastest_point, first_not_finite,
+                          runaway_causes,
                           points_kinetic_energy, warn_of_a_long_step, warn_of_energy_drift)
 from .observers import EnergyBookkeeping, kinetic_energy
 from .effects.base import ForceNotFinite, Recorder
@@ -105,7 +106,7 @@ class Simulation:
                                for body, members in zip(scene.bodies, self.body_slices))
         self.energy_guard = EnergyGuard(
             initial=kinetic_energy(self.particles.mass, self.particles.v) + self.strain_energy(),
-            floor=1e-9 * stiffness_volume,
+            floor=1e-9 * stiffness_volume, causes=runaway_causes(scene.solver, self.grid.nonnegative),
         )
 
     # -- set-up -----------------------------------------------------------------

@@ -19,7 +19,7 @@ import pytest
 from femgrid_mpm import cli
 from femgrid_mpm.analysis import bar_axial_period_2d, modal_velocity_probe, zero_crossing_period
 from femgrid_mpm.bases import BASES
-from femgrid_mpm.diagnostics import EnergyGuard, NegativeMassWarning, SimulationStopped
+from femgrid_mpm.diagnostics import RUNAWAY_CAUSES, EnergyGuard, NegativeMassWarning, SimulationStopped, runaway_causes
 from femgrid_mpm.mass import positive_weights
 from femgrid_mpm.output import scene_to_toml
 from femgrid_mpm.scene import bundled_scene
@@ -300,3 +300,17 @@ def test_runaway_energy_via_the_command_line_exits_3_with_valid_outputs(tmp_path
     assert len(list((out / "particles").glob("particles_*.vtu"))) == len(energy)
     final = np.load(out / "final.npz")
     assert int(final["step"]) == summary["stop"]["step"] and np.isfinite(final["x"]).all()
+
+
+def test_a_consistent_runaway_suggests_the_weak_fraction_and_following_it_completes():
+    """q1 with consistent mass on the drifting bar: the node ahead of the bar's edge holds a sliver
+    of its function's volume, a mode of almost no mass, and the energy runs away at step 24; the
+    stop suggests ``solver.weak_fraction = 0.1``, and the run that takes it completes its 186 steps.
+    Lumped mass's stops do not suggest it."""
+    scene = bundled_scene("drifting_bar").with_overrides(**{"solver.mass": "consistent"})
+    with pytest.raises(SimulationStopped, match=r"step 24 .*solver\.weak_fraction = 0\.1 lumps them") as stop:
+        Simulation(scene).run()
+    assert stop.value.reason == "runaway_energy"
+    result = Simulation(scene.with_overrides(**{"solver.weak_fraction": 0.1})).run()
+    assert result.summary["steps"] == 186
+    assert runaway_causes(bundled_scene("drifting_bar").solver, True) == RUNAWAY_CAUSES
