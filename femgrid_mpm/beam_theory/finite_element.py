@@ -52,7 +52,8 @@ def cantilever_bending_period_fe(
 
     stiffness = skfem.asm(linear_elasticity(*_plane_lame(E, nu, plane)), basis)
     K, M, _, _ = skfem.condense(stiffness, skfem.asm(mass, basis), D=clamped)
-    # a fixed first vector: ARPACK's own draw changes from call to call in a process
+    # a fixed first vector: ARPACK's own draw changes from call to call in a process (stability.arpack_start's,
+    # written here again so that the reference solutions import nothing of the engine's)
     eigenvalues = eigsh(K, k=1, M=M, sigma=0.0, v0=np.random.default_rng(0).standard_normal(K.shape[0]),
                         return_eigenvectors=False)
     return float(2 * np.pi / np.sqrt(eigenvalues[0]))

@@ -146,7 +146,8 @@ class RunChoices:
         if layout.fill is not None and self.tensor_cg is None:
             self.tensor_cg = not layout.direct
         on_kept = keeps_factors and layout.direct and not stale
-        on_kept_factors = [system for system in systems if tuple(system.columns) not in layout.every_step()]
+        every_step = layout.every_step()
+        on_kept_factors = [system for system in systems if tuple(system.columns) not in every_step]
         if on_kept and on_kept_factors:  # were their factors made again (this step's own L D L^T or SuperLU's)?
             self.rate.observe(any(system.ldl is not None or system.factors is not None for system in on_kept_factors))
         if keeps_factors and layout.direct:  # the fill of the factors made this step, for the trial's limit

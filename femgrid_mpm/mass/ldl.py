@@ -117,17 +117,21 @@ class SymbolicLDL:
         counts = np.diff(self.lower_indptr).astype(float)
         return float(np.sum(counts**2)) / max(self.factor_entries, 1)
 
+    def factors_within(self, work: float) -> bool:
+        """At most :data:`EVERY_STEP_NODES` free nodes and a numeric pass of at most ``work``."""
+        return len(self.order) <= EVERY_STEP_NODES and self.work <= work
+
     @functools.cached_property
     def every_step(self) -> bool:
         """Whether factoring this layout every step is cheaper than CG on kept factors
-        (:data:`EVERY_STEP_NODES`, :data:`EVERY_STEP_WORK`)."""
-        return len(self.order) <= EVERY_STEP_NODES and self.work <= EVERY_STEP_WORK
+        (:data:`EVERY_STEP_WORK`)."""
+        return self.factors_within(EVERY_STEP_WORK)
 
     @property
     def every_step_when_stale(self) -> bool:
         """The same where the kept factors are made again at most steps anyway
         (:class:`.reused.RefactorRate`, :data:`STALE_WORK`)."""
-        return len(self.order) <= EVERY_STEP_NODES and self.work <= STALE_WORK
+        return self.factors_within(STALE_WORK)
 
     @property
     def factor_entries(self) -> int:
