@@ -43,8 +43,8 @@ def test_a_cold_cache_is_announced_once_when_a_kernel_compiles(tmp_path, cache_a
 
 
 def test_a_command_that_compiles_nothing_says_nothing(tmp_path, cache_at, capsys):
-    """``info`` builds the simulation and estimates its step with no kernel: no note, even on a
-    cold cache (it said it was compiling for a minute and ended in a second)."""
+    """``info`` builds the simulation and estimates a lumped scene's step with no kernel: no note
+    that kernels compile, even on a cold cache."""
     cache_at(tmp_path)
     path = tmp_path / "bar.toml"
     path.write_text(helpers_scene_text())

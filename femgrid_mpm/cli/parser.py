@@ -176,8 +176,8 @@ def emit(text: str) -> None:
 
 def say(kind: str, message: str) -> None:
     """One line on stderr: ``femgrid-mpm: KIND: message`` (nothing if stderr cannot be written);
-    a progress bar drawn there is cleared first and drawn again below (a note given while the
-    first step compiles the kernels landed on the bar's line)."""
+    a progress bar drawn there is cleared first and drawn again below (the kernels compile,
+    and say so, inside the first step, after the run's bar is drawn)."""
     from tqdm import tqdm
 
     try:
