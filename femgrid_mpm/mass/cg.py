@@ -7,6 +7,7 @@ import numpy as np
 
 from ..kernels.arithmetic import fused
 from ..kernels.compiled import compiled
+from .gauss_seidel import gauss_seidel_cg, sweeps_apply
 from .preconditioners import _apply_tensor
 from .sparse import _CompiledCSR, _product_dot
 
@@ -15,9 +16,10 @@ _NO_TENSOR = (False, np.zeros(1), np.zeros(1, dtype=bool), np.zeros((4, 1)), np.
 
 
 def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=None, layer=None):
-    """Preconditioned CG on the columns of ``b`` (n, k) at once: Jacobi, or the
-    arguments of :func:`_apply_tensor` (``tensor``), completed by a
-    :class:`BoundaryLayer` (``layer``).
+    """Preconditioned CG on the columns of ``b`` (n, k) at once: symmetric Gauss-Seidel
+    where the matrix is stored as its sweeps read it (:mod:`.gauss_seidel`, its own test of
+    convergence), else Jacobi, or the arguments of :func:`_apply_tensor` (``tensor``),
+    completed by a :class:`BoundaryLayer` (``layer``).
 
     Returns ``(x, converged, iterations)``.  Converged means every column's
     residual fell to ``rtol * |b|``.  A non-positive curvature ``p.A.p``
@@ -25,6 +27,8 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=
     iteration as not converged (False); a negative ``r.z`` (a preconditioner
     that is not positive definite) stops it with ``converged = None``.
     """
+    if tensor is None and layer is None and sweeps_apply(A):
+        return gauss_seidel_cg(A, b, x0, rtol, max_iterations)
     if isinstance(A, _CompiledCSR) and layer is None:
         return _compiled_cg(A.indptr, A.indices, A.data, A.upper_start_or_none(), np.ascontiguousarray(b, dtype=float),
                             np.ascontiguousarray(x0, dtype=float), inverse_diagonal, rtol, max_iterations,

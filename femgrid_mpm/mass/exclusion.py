@@ -144,7 +144,7 @@ def unexcluded_matrix(system_matrix: _CompiledCSR, correction: tuple) -> _Compil
     data[positions] = old  # the entries themselves, not a difference: exact at any scale
     full = _CompiledCSR((data, system_matrix.indices.copy(), system_matrix.indptr.copy()),
                         shape=system_matrix.shape, copy=False)
-    full.upper_start = system_matrix.upper_start
+    full.upper_start, full.upper_ordered = system_matrix.upper_start, system_matrix.upper_ordered
     return full
 
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .exclusion import _exclude_in_place
+from .gauss_seidel import cg_work, sweeps_apply
 from .ldl import small_layouts
 from .reused import RATE_WINDOW, REFACTOR_ITERATIONS, KeptFactors, RefactorRate
 from .system import _System
@@ -48,7 +49,7 @@ class SystemsLayout:
     direct: bool
     small: dict | None = None  # {columns: SymbolicLDL}; None: not analysed yet
     fill: float | None = None  # SuperLU's fill, where make_systems measured it (:func:`_fill`)
-    stale_cg: bool = False  # solved by CG because the kept factors went stale (make_systems)
+    stale_cg: bool = False  # solved by CG instead of kept factors (make_systems, CgTrial)
     edges: dict = field(default_factory=dict)  # {columns: SymbolicLDL or None} (.singular)
 
     @classmethod
@@ -69,16 +70,19 @@ class SystemsLayout:
 
 @dataclass
 class CgTrial:
-    """Whether CG, taken because the kept factors went stale (:func:`make_systems`), is cheaper
-    than they were: over its first :data:`.reused.RATE_WINDOW` steps, CG may take at most as many
-    iterations a solve as the kept factors cost at their most in products with the matrix
-    (:data:`.reused.REFACTOR_ITERATIONS` + 1 solves with factors holding ``fill`` entries per
-    matrix entry, and as many products less one), their remaking not counted; more, and the run
-    goes back to kept factors for good.  The drifting bar at h = 0.04 (2,200-2,900 free nodes),
-    CG's iterations a solve against the limit: quadratic splines 109 against 36 (47 against 21
-    ms a step on kept factors), open-knot 55 against 22, q1 23-33 against 20 (7.6 against 7.3 ms),
-    gimp 24 against 21.5 (13.7 against 16.0 ms: the remaking left out, CG's gain here is not
-    taken); gimp's block at 1e4 points 6.6 against 19 (4.8 against 13.2 ms), which stays on CG."""
+    """Whether CG, tried instead of the kept factors (:func:`make_systems`), is cheaper than
+    they were: over its first :data:`.reused.RATE_WINDOW` steps, CG's work
+    (:func:`.gauss_seidel.cg_work`) may be at most the kept factors' over their last window
+    (:attr:`.reused.RefactorRate.per_step`, their remaking counted); more, and the run goes back
+    to kept factors for good.  CG is tried where the kept factors went stale, and after their
+    first window where CG would take symmetric Gauss-Seidel (:mod:`.gauss_seidel`).  (A
+    checkpoint without the kept factors' work takes the old bound: as many iterations a solve as
+    the kept factors cost at their most in products, :meth:`limit`.)
+
+    Measured, ms a step on kept factors against CG, and the verdict: q1's block at 1e4 points
+    1.79 against 1.18, CG; the cantilever at h = 0.0625, whose kept factors take one iteration
+    an acceleration, q1 2.71 against 2.95 and open-knot quadratic splines 4.9 against 7.6, kept
+    factors; the drifting bar at h = 0.05, q1 2.23 against 1.50, CG."""
 
     fill: float = 0.0  # entries of the last kept factors per entry of their matrix
     start: int | None = None  # the mass's CG iterations when the trial began (None: not begun)
@@ -90,17 +94,22 @@ class CgTrial:
         return (REFACTOR_ITERATIONS + 1) * self.fill + REFACTOR_ITERATIONS
 
     def begin(self, iterations: int) -> None:
-        """A step on stale CG with the mass's CG iterations so far: the trial's first, if not begun."""
+        """A step on CG instead of kept factors with the mass's CG iterations so far: the
+        trial's first, if not begun."""
         if self.start is None:
             self.start = iterations
 
-    def observe(self, iterations: int, solves_per_step: int) -> None:
+    def observe(self, iterations: int, solves_per_step: int, kept_per_step: float | None) -> None:
         """At a step's start, once begun: the mass's CG iterations so far."""
         if self.start is None or self.verdict is not None:
             return
         self.steps += 1
-        if self.steps == RATE_WINDOW:  # (no fill measured, no limit: CG stays)
-            self.verdict = bool(not self.fill or iterations - self.start <= self.limit() * RATE_WINDOW * solves_per_step)
+        if self.steps == RATE_WINDOW:
+            taken = iterations - self.start
+            if kept_per_step is not None:
+                self.verdict = bool(cg_work(solves_per_step * RATE_WINDOW, taken) <= kept_per_step * RATE_WINDOW)
+            else:  # (no fill measured, no limit: CG stays)
+                self.verdict = bool(not self.fill or taken <= self.limit() * RATE_WINDOW * solves_per_step)
 
     def values(self) -> list:
         return [self.fill, self.start, self.steps, self.verdict]
@@ -134,13 +143,17 @@ class RunChoices:
         """:func:`make_systems` with these choices, which it updates (``auto``: ``linear_solver``
         is "auto"; ``iterations``: the mass's CG iterations so far)."""
         stale = self.rate.stale
-        self.trial.observe(iterations, 2 * len(layout.groups))  # velocity and acceleration
+        solves = 2 * len(layout.groups)  # velocity and acceleration
+        self.trial.observe(iterations, solves, self.rate.per_step)
         if layout.stale_cg and self.trial.verdict is False:  # CG took more than the kept factors did
             layout.direct, layout.stale_cg = True, False
         keeps_factors = auto and layout.direct
+        # CG is tried where the factors went stale, or once they were measured over a window if CG
+        # would sweep (symmetric Gauss-Seidel: its iterations are a third of Jacobi's)
+        sweeps = not tensor_preconditioner and sweeps_apply(matrix)
+        try_cg = (stale or (sweeps and self.rate.per_step is not None)) and self.trial.verdict is not False
         systems, correction, kept = make_systems(matrix, diagonal_index, layout, kept, weak, keeps_factors,
-                                                 tensor_preconditioner and self.tensor_cg is None, stale,
-                                                 cg_when_stale=self.trial.verdict is not False)
+                                                 tensor_preconditioner and self.tensor_cg is None, stale, try_cg)
         if layout.stale_cg:
             self.trial.begin(iterations)
         if layout.fill is not None and self.tensor_cg is None:
@@ -148,13 +161,14 @@ class RunChoices:
         on_kept = keeps_factors and layout.direct and not stale
         every_step = layout.every_step()
         on_kept_factors = [system for system in systems if tuple(system.columns) not in every_step]
-        if on_kept and on_kept_factors:  # were their factors made again (this step's own L D L^T or SuperLU's)?
-            self.rate.observe(any(system.ldl is not None or system.factors is not None for system in on_kept_factors))
         if keeps_factors and layout.direct:  # the fill of the factors made this step, for the trial's limit
             for system in on_kept_factors:  # (or of those kept, where none was measured: a checkpoint without it)
                 factors = kept.get(tuple(system.columns)) if system.kept is None else system.kept
                 if factors is not None and (system.kept is None or not self.trial.fill):
                     self.trial.fill = factors.entries / max(int(np.count_nonzero(system.matrix.data)), 1)
+        if on_kept and on_kept_factors:  # were their factors made again (this step's own L D L^T or SuperLU's)?
+            refactored = sum(system.ldl is not None or system.factors is not None for system in on_kept_factors)
+            self.rate.observe(refactored > 0, iterations, solves, self.trial.fill)
         return systems, correction, kept
 
     def values(self) -> dict:
@@ -168,7 +182,7 @@ class RunChoices:
 
 def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayout, kept: KeptFactors,
                  weak: np.ndarray, keeps_factors: bool, fill_test: bool = False,
-                 stale: bool = False, cg_when_stale: bool = True) -> tuple[list, tuple | None, KeptFactors]:
+                 stale: bool = False, try_cg: bool = False) -> tuple[list, tuple | None, KeptFactors]:
     """The step's systems of the assembled ``matrix``: ``(systems, correction, kept)``, the
     entries the exclusion overwrote if it was made into the one system in place, and the
     factors kept for the next steps (``kept``: those that fit the layout).
@@ -181,9 +195,10 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
     that CG instead (not direct): :class:`RunChoices` keeps the decision for the run, since the
     fill moves with the points (their couplings' zeros) while the layout stays.
     ``stale``: the kept factors were made again at too many steps (:class:`.reused.RefactorRate`):
-    the small systems that factor cheaply are factored every step, and a layout with others
-    (SuperLU's, or small ones that factor slowly) is solved by CG instead (not direct) unless
-    ``cg_when_stale`` is False (:class:`CgTrial` found CG dearer).  GIMP's block, whose solves on
+    the small systems that factor cheaply are factored every step.  ``try_cg`` (stale, or CG
+    would sweep, and :class:`CgTrial` has not found CG dearer): a layout with systems not
+    factored every step (SuperLU's, or small ones that factor slowly) is solved by CG instead
+    (not direct).  GIMP's block, whose solves on
     kept factors took more than :data:`.reused.REFACTOR_ITERATIONS` iterations at ~45% of the
     steps, at 2.5e3 and 5e3 points (small systems that factor slowly) 1.74 and 3.6 ms a step on
     kept factors, 1.41 and 2.5-2.9 on CG; at 1e4 (SuperLU's) 10.2-13.2 against 4.8-5.1."""
@@ -192,9 +207,9 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
         layout.small = small_layouts(matrix, layout.excluded, layout.groups, diagonal_index, layout.small)
     excluded, small = layout.excluded, layout.small or {}
     every_step = layout.every_step(stale)
-    if keeps_factors and stale and cg_when_stale and layout.direct and not set(layout.groups) <= every_step:
-        # the kept factors were made again at most steps and these systems cost too much to
-        # factor every step: CG (Jacobi, or the tensor preconditioner), while it pays (CgTrial)
+    if keeps_factors and try_cg and layout.direct and not set(layout.groups) <= every_step:
+        # these systems cost too much to factor every step, and the kept factors went stale or
+        # CG would sweep: CG, while it pays (CgTrial)
         layout.direct, layout.stale_cg = False, True
     kept = KeptFactors({columns: factors for columns, factors in kept.items() if columns not in every_step})
     correction = None

@@ -43,13 +43,22 @@ RATE_WINDOW = 20
 RATE_LIMIT = 0.4
 
 
+#: a refactorization of kept factors in solves with them: SuperLU's factorization and its
+#: conversion took 33-59 times one solve of two columns with the factors it made (q1, q2,
+#: serendipity at 5e3 and 1e4 points, quadratic splines at 1e4; 2-6 ms)
+REFACTOR_SOLVES = 35
+
+
 @dataclass
 class RefactorRate:
-    """How often the kept factors are made again; once they are in :data:`RATE_LIMIT` of
-    :data:`RATE_WINDOW` steps (``stale``), CG's iterations on factors that keep going stale buy
-    nothing: for the rest of the run the small systems that factor cheaply enough
-    (:data:`.ldl.STALE_WORK`) are factored every step, and the others are solved by CG without
-    factors (:func:`.layout.make_systems`).
+    """How often the kept factors are made again, and what they cost; once they are made again
+    in :data:`RATE_LIMIT` of :data:`RATE_WINDOW` steps (``stale``), CG's iterations on factors
+    that keep going stale buy nothing: for the rest of the run the small systems that factor
+    cheaply enough (:data:`.ldl.STALE_WORK`) are factored every step, and the others are solved
+    by CG without factors while it costs less (:func:`.layout.make_systems`, :class:`.layout.CgTrial`).
+
+    ``per_step``: the work of the kept factors' solves and refactorizations a step over the
+    last full window, in products with the matrix (:meth:`observe`), against which CG is tried.
 
     GIMP's block made its kept factors again at 93 of 200 steps at 1e3 points, at ~85 of 200
     from 2.5e3 to 1e4 (a solve took more than :data:`REFACTOR_ITERATIONS`, or the weak nodes
@@ -60,24 +69,44 @@ class RefactorRate:
     steps: int = 0
     refactors: int = 0
     stale: bool = False
+    start: int | None = None  # the mass's CG iterations when the window began
+    per_step: float | None = None
 
-    def observe(self, refactored: bool) -> None:
-        """One step of systems on kept factors, whether they were made again."""
+    def observe(self, refactored: bool, iterations: int = 0, solves: int = 2, fill: float = 0.0) -> None:
+        """One step of systems on kept factors: whether they were made again, the mass's CG
+        iterations so far, the solves a step and the factors' entries per matrix entry."""
         if self.stale:
             return
+        if self.start is None:
+            self.start = iterations
         self.steps += 1
         self.refactors += bool(refactored)
         if self.steps == RATE_WINDOW:
             self.stale = self.refactors >= RATE_LIMIT * RATE_WINDOW
-            self.steps, self.refactors = 0, 0
+            # (the first window's first step made the factors the run needs whatever follows)
+            remade = self.refactors - (self.per_step is None and self.refactors > 0)
+            work = kept_work(solves * RATE_WINDOW, iterations - self.start, remade, fill)
+            self.per_step = work / RATE_WINDOW
+            self.steps, self.refactors, self.start = 0, 0, iterations
 
     def values(self) -> list:
         """A checkpoint's values (:meth:`restored`)."""
-        return [self.steps, self.refactors, self.stale]
+        return [self.steps, self.refactors, self.stale, self.start, self.per_step]
 
     @classmethod
     def restored(cls, values: list | None) -> "RefactorRate":
-        return cls() if values is None else cls(int(values[0]), int(values[1]), bool(values[2]))
+        if values is None:
+            return cls()
+        start, per_step = (values[3], values[4]) if len(values) > 3 else (None, None)  # (older checkpoints)
+        return cls(int(values[0]), int(values[1]), bool(values[2]), None if start is None else int(start),
+                   None if per_step is None else float(per_step))
+
+
+def kept_work(solves: int, iterations: int, refactors: int, fill: float) -> float:
+    """The work of solves on kept factors holding ``fill`` entries per matrix entry, in products
+    with the matrix: each solve a product and a solve with the factors, and as many again for
+    each of its ``iterations``; each refactorization :data:`REFACTOR_SOLVES` solves."""
+    return (solves + iterations) * (fill + 1.0) + refactors * REFACTOR_SOLVES * fill
 
 
 @dataclass

@@ -21,6 +21,9 @@ class _CompiledCSR(sp.csr_matrix):
     """
 
     upper_start: np.ndarray | None = None
+    #: every entry after a row's diagonal has a larger column (:func:`upper_is_later`): the
+    #: stored half is the upper triangle, as :mod:`.gauss_seidel`'s sweeps read it
+    upper_ordered: bool = False
 
     def upper_start_or_none(self) -> np.ndarray:
         """``upper_start`` for the kernels (an empty array: row by row)."""
@@ -52,6 +55,7 @@ class PatternMatrix:
         if self._pattern is not pattern or self._matrix.data.shape != pattern.data.shape:
             self._matrix = _CompiledCSR(pattern.matrix())
             self._matrix.upper_start = pattern.diagonal
+            self._matrix.upper_ordered = upper_is_later(self._matrix.indptr, self._matrix.indices, pattern.diagonal)
             self._pattern = pattern
         else:
             np.copyto(self._matrix.data, pattern.data)
@@ -122,6 +126,16 @@ def _csr_times_dense_dot(indptr, indices, data, x, out, dot):
                     total = fused(data[entry], x[indices[entry], c], total)
                 out[i, c] = total
                 dot[c] = fused(x[i, c], total, dot[c])
+
+
+@compiled()
+def upper_is_later(indptr, indices, upper_start) -> bool:
+    """Whether every entry after a row's diagonal has a larger column."""
+    for i in range(len(indptr) - 1):
+        for entry in range(upper_start[i] + 1, indptr[i + 1]):
+            if indices[entry] <= i:
+                return False
+    return True
 
 
 @compiled()

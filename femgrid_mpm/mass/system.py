@@ -66,6 +66,7 @@ class _System:
             reduced = matrix if in_place and isinstance(matrix, _CompiledCSR) else \
                 _CompiledCSR((data, matrix.indices, matrix.indptr), shape=matrix.shape, copy=False)
             reduced.upper_start = diagonal_index  # exclusion and lumping keep the symmetry and the order
+            reduced.upper_ordered = isinstance(matrix, _CompiledCSR) and matrix.upper_ordered
             inverse_diagonal = 1.0 / data[diagonal_index]
         return cls(columns, excluded, reduced, inverse_diagonal, _factor(reduced) if direct else None)
 
