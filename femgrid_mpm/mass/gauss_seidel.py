@@ -58,6 +58,15 @@ def gauss_seidel_cg(matrix: _CompiledCSR, b: np.ndarray, x0: np.ndarray, rtol: f
                             rtol, max_iterations)
 
 
+@compiled(inline="always")
+def errors_within(error, size, rtol) -> bool:
+    """Whether every column's largest error estimate is within ``rtol`` of its largest value (NaN: not)."""
+    for c in range(error.shape[0]):
+        if not error[c] <= rtol * size[c]:
+            return False
+    return True
+
+
 @compiled()
 def _gauss_seidel_cg(indptr, indices, data, upper_start, b, x0, rtol, max_iterations):
     n, k = b.shape
@@ -99,11 +108,7 @@ def _gauss_seidel_cg(indptr, indices, data, upper_start, b, x0, rtol, max_iterat
     curvature = np.zeros(k)
     _sweep_up(indptr, indices, data, upper_start, inverse, q, s, beta, t, previous, u, error)
     for iteration in range(max_iterations + 1):
-        done = True
-        for c in range(k):
-            if not error[c] <= rtol * size[c]:  # NaN too
-                done = False
-        if done:
+        if errors_within(error, size, rtol):
             return x, True, iteration
         if iteration == max_iterations:
             break

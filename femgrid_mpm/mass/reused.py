@@ -25,6 +25,7 @@ import scipy.sparse as sp
 
 from ..kernels.arithmetic import fused
 from ..kernels.compiled import compiled
+from .gauss_seidel import errors_within
 from .sparse import _ROW_BY_ROW, _CompiledCSR, _product_dot
 
 #: more iterations than this in a solve with the kept factors: refactor at the next step
@@ -387,11 +388,7 @@ def _factor_preconditioned_cg(indptr, indices, data, upper_start, b, x0, rtol, m
             for c in range(k):
                 error[c] = max(error[c], abs(z[i, c]))
                 size[c] = max(size[c], abs(x[i, c]))
-        done = True
-        for c in range(k):
-            if not error[c] <= rtol * size[c]:  # NaN too
-                done = False
-        if done:
+        if errors_within(error, size, rtol):
             return x, True, iteration
         if iteration == max_iterations:
             break
