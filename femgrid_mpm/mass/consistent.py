@@ -49,6 +49,7 @@ from .cg import _preconditioned_cg, initial_guess
 from .direct import _direct_solve, _factor
 from .exclusion import NO_NODES, active_and_weak, unexcluded_apply, unexcluded_matrix
 from .layout import RunChoices
+from .nodal import free_part, in_frame, plus_row
 from .preconditioners import TensorPreconditioner
 from .reused import KeptFactors
 from .protocol import Assembly, Inertia, MassModel, NodalSums, SingularMassError
@@ -253,9 +254,9 @@ class ConsistentMass(MassModel):
     def grid_velocity(self, relative_momentum: np.ndarray, frame_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 17 in the frame moving with ``frame_velocity``: ``(p, v)``, the momentum
         ``p_rel + m v_ref`` and the velocity ``M^-1 p_rel + v_ref``."""
-        momentum = relative_momentum + self.lumped[:, None] * frame_velocity
         self._frame = np.asarray(frame_velocity, dtype=float)
-        velocity = self.solve(relative_momentum, "velocity", frame=self._frame) + frame_velocity
+        momentum = in_frame(np.ascontiguousarray(relative_momentum, dtype=float), self.lumped, self._frame)
+        velocity = plus_row(self.solve(relative_momentum, "velocity", frame=self._frame), self._frame)
         if self._keeps_history:  # the frame of the velocities in the history, for the next guess
             self._previous["frame"] = (self._frame.reshape(1, 2).copy(),)
         return momentum, velocity
@@ -296,12 +297,16 @@ class ConsistentMass(MassModel):
                 else:
                     solution[:, system.columns] = system.ldl.solve(rhs[:, system.columns])
                 continue
-            part = np.where(system.excluded[:, None], 0.0, rhs[:, system.columns])
-            coupled = None if coupling is None else np.where(system.excluded[:, None], 0.0, coupling[:, system.columns])
-            if not part.any() and (coupled is None or not coupled.any()):  # e.g. the relative momentum of a rigid motion
+            columns = np.asarray(system.columns, dtype=np.int64)
+            part, nonzero = free_part(np.ascontiguousarray(rhs, dtype=float), columns, system.excluded)
+            coupled = None if coupling is None else free_part(coupling, columns, system.excluded)[0]
+            if not nonzero and (coupled is None or not coupled.any()):  # e.g. the relative momentum of a rigid motion
                 continue
-            solution[:, system.columns] = self._solve_system(system, part, kind, coupled,
-                                                             frame[system.columns] if moving else None)
+            solved = self._solve_system(system, part, kind, coupled, frame[system.columns] if moving else None)
+            if len(system.columns) == rhs.shape[1]:  # the one system: its solution is the whole
+                solution = solved
+            else:
+                solution[:, system.columns] = solved
         if self._keeps_history:
             self._previous[kind] = (*self._previous.get(kind, ())[-1:], solution)
         return solution

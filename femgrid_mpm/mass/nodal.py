@@ -1,0 +1,48 @@
+"""The consistent solve's node-wise passes over (n, k) arrays, compiled.
+
+numpy broadcasts a node's array against a column of the frame row by row: ``p + m[:, None] * v``
+over 3025 nodes took 28 us, a tenth of a q1 consistent step at 1e4 points, and
+``np.where(excluded[:, None], 0, rhs[:, columns])`` 11 us; one compiled pass takes 2-3 us.  The
+arithmetic is numpy's, operation by operation (no fused products): the results are the same bits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels.compiled import compiled
+
+
+@compiled()
+def in_frame(relative, lumped, frame):
+    """``relative + lumped[:, None] * frame``: the momentum ``p_rel + m v_ref``."""
+    n, k = relative.shape
+    out = np.empty((n, k))
+    for i in range(n):
+        for c in range(k):
+            out[i, c] = relative[i, c] + lumped[i] * frame[c]
+    return out
+
+
+@compiled()
+def plus_row(values, row):
+    """``values + row[None, :]``: a velocity relative to the frame made absolute."""
+    n, k = values.shape
+    out = np.empty((n, k))
+    for i in range(n):
+        for c in range(k):
+            out[i, c] = values[i, c] + row[c]
+    return out
+
+
+@compiled()
+def free_part(values, columns, excluded):
+    """``values[:, columns]`` with the excluded rows zero, and whether any entry is nonzero."""
+    n, k = values.shape[0], len(columns)
+    out = np.empty((n, k))
+    nonzero = False
+    for i in range(n):
+        for c in range(k):
+            out[i, c] = 0.0 if excluded[i] else values[i, columns[c]]
+            nonzero = nonzero or out[i, c] != 0.0
+    return out, nonzero
