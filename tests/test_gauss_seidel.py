@@ -90,4 +90,23 @@ def test_sweeps_need_the_upper_triangle_after_each_diagonal():
     swapped.upper_start = np.array([0, 2, 6])
     assert not upper_is_later(swapped.indptr, swapped.indices, swapped.upper_start)
     ordered.upper_ordered = True
-    assert sweeps_apply(ordered) and not sweeps_apply(swapped) and not sweeps_apply(sp.csr_matrix(ordered))
+    assert sweeps_apply(ordered) and not sweeps_apply(swapped)
+    # any CSR matrix with sorted columns and every diagonal stored is swept by its upper triangle
+    # (the scipy path's); not one whose columns are unsorted, nor one without a diagonal entry
+    assert sweeps_apply(sp.csr_matrix(ordered))
+    unsorted = sp.csr_matrix((swapped.data, swapped.indices, swapped.indptr), shape=(3, 3))
+    unsorted.has_sorted_indices = False
+    assert not sweeps_apply(unsorted)
+    assert not sweeps_apply(sp.csr_matrix(np.array([[0.0, 1.0], [1.0, 2.0]])))
+
+
+def test_a_general_csr_matrix_is_solved_like_the_pattern_half():
+    """The scipy path's CSR matrix (both halves stored, product row by row) against the pattern's
+    half: the same iterations, the same solution to 1e-12 of its largest value."""
+    matrix, rhs = system_of("q2")
+    general = sp.csr_matrix(matrix)  # a product row by row: the full matrix, columns sorted
+    general.sort_indices()
+    half = gauss_seidel_cg(matrix, rhs, np.zeros_like(rhs), 1e-6, 500)
+    full = gauss_seidel_cg(general, rhs, np.zeros_like(rhs), 1e-6, 500)
+    assert half[1] and full[1] and half[2] == full[2]
+    assert np.abs(half[0] - full[0]).max() <= 1e-12 * np.abs(half[0]).max()

@@ -12,7 +12,8 @@ import scipy.sparse.linalg as spla
 
 from femgrid_mpm.mass import layout, ldl
 from femgrid_mpm.mass.direct import _factor
-from femgrid_mpm.mass.reused import RATE_LIMIT, RATE_WINDOW, REFACTOR_ITERATIONS, RefactorRate, ReusedFactors
+from femgrid_mpm.mass.reused import (RATE_LIMIT, RATE_WINDOW, REFACTOR_ITERATIONS, RefactorRate, ReusedFactors,
+                                     kept_work)
 from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
 from helpers import advanced_benchmark_block, benchmark_block
@@ -182,6 +183,34 @@ def test_refactor_rate_switches_at_its_limit():
     below.observe(True)
     assert (below.steps, below.refactors) == (1, 1)
     assert RefactorRate.restored(below.values()) == below and RefactorRate.restored(None) == RefactorRate()
+
+
+def test_refactor_rate_measures_the_kept_factors_work_a_step():
+    """Five iterations and two solves a step on factors of fill 1, no refactorization: each step costs
+    ``kept_work(2, 5, 0, 1) = 14`` products in every window.  The rate is observed at a step's start,
+    so a window that begins with a count holds one step fewer of iterations (the first, and the one
+    after CG, :meth:`restart`), as does the rest of a window resumed from an older checkpoint."""
+    assert kept_work(2, 5, 0, 1.0) == 14.0
+
+    def run(rate, steps, iterations):
+        for _ in range(steps):
+            rate.observe(False, iterations, 2, 1.0)
+            iterations += 5
+        return iterations
+
+    rate = RefactorRate()
+    iterations = run(rate, RATE_WINDOW, 100)
+    assert rate.per_step == 14.0
+    rate.per_step = None
+    iterations = run(rate, RATE_WINDOW, iterations)
+    assert rate.per_step == 14.0
+    rate.restart()
+    rate.per_step = None
+    run(rate, RATE_WINDOW, iterations)
+    assert rate.per_step == 14.0
+    older = RefactorRate.restored([10, 0, False])  # a window half done, its iterations not known
+    run(older, RATE_WINDOW - 10, 0)
+    assert older.per_step == 14.0 and older.steps == 0
 
 
 def against_direct(scene, windows: int = 2) -> Simulation:

@@ -26,10 +26,12 @@ with the entries after each row's diagonal those of larger columns (``upper_star
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..kernels.arithmetic import fused
 from ..kernels.compiled import compiled
-from .sparse import _CompiledCSR, _product_dot
+from .ldl import _diagonal_index
+from .sparse import _ROW_BY_ROW, _CompiledCSR, _product_dot
 
 
 #: a solve's work in products with the matrix: its start (a product, a sweep each way and a
@@ -44,16 +46,31 @@ def cg_work(solves: int, iterations: int) -> float:
     return START_WORK * solves + ITERATION_WORK * iterations
 
 
+def sweep_layout(matrix) -> "tuple[np.ndarray, np.ndarray] | None":
+    """Where the sweeps find each row's diagonal, and the product's half (empty: row by row), or
+    None where they cannot sweep: the mass pattern's matrix (its stored half, in stencil order,
+    each row's later columns after its diagonal) or any CSR matrix with sorted columns and every
+    diagonal stored (the scipy path's, a blended one: the entries after a row's diagonal are its
+    upper triangle)."""
+    if isinstance(matrix, _CompiledCSR) and matrix.upper_start is not None:
+        return (matrix.upper_start, matrix.upper_start) if matrix.upper_ordered else None
+    if not sp.issparse(matrix) or matrix.format != "csr" or not matrix.has_sorted_indices:
+        return None
+    diagonal = _diagonal_index(matrix.indptr, matrix.indices)
+    return None if len(diagonal) and diagonal.min() < 0 else (diagonal, _ROW_BY_ROW)
+
+
 def sweeps_apply(matrix) -> bool:
-    """Whether ``matrix`` holds its upper triangle after each row's diagonal, as the sweeps read it."""
-    return isinstance(matrix, _CompiledCSR) and matrix.upper_start is not None and matrix.upper_ordered
+    """Whether CG on ``matrix`` takes symmetric Gauss-Seidel (:func:`sweep_layout`)."""
+    return sweep_layout(matrix) is not None
 
 
-def gauss_seidel_cg(matrix: _CompiledCSR, b: np.ndarray, x0: np.ndarray, rtol: float,
+def gauss_seidel_cg(matrix, b: np.ndarray, x0: np.ndarray, rtol: float,
                     max_iterations: int) -> tuple[np.ndarray, bool, int]:
     """CG on ``matrix x = b`` (b (n, k)) from ``x0``: ``(x, converged, iterations)``; a
     non-positive curvature (a singular matrix) stops it as not converged."""
-    return _gauss_seidel_cg(matrix.indptr, matrix.indices, matrix.data, matrix.upper_start,
+    diagonal, half = sweep_layout(matrix)
+    return _gauss_seidel_cg(matrix.indptr, matrix.indices, matrix.data, diagonal, half,
                             np.ascontiguousarray(b, dtype=float), np.ascontiguousarray(x0, dtype=float),
                             rtol, max_iterations)
 
@@ -68,7 +85,7 @@ def errors_within(error, size, rtol) -> bool:
 
 
 @compiled()
-def _gauss_seidel_cg(indptr, indices, data, upper_start, b, x0, rtol, max_iterations):
+def _gauss_seidel_cg(indptr, indices, data, upper_start, half, b, x0, rtol, max_iterations):
     n, k = b.shape
     x = x0.copy()
     inverse = np.empty(n)
@@ -83,7 +100,7 @@ def _gauss_seidel_cg(indptr, indices, data, upper_start, b, x0, rtol, max_iterat
             for i in range(n):
                 x[i, c] = 0.0
     s = np.empty_like(b)  # D^1/2 r^ = D (D + L)^-1 r
-    _product_dot(indptr, indices, data, upper_start, x, s, np.zeros(k))
+    _product_dot(indptr, indices, data, half, x, s, np.zeros(k))
     for i in range(n):
         for c in range(k):
             s[i, c] = b[i, c] - s[i, c]

@@ -18,6 +18,7 @@ import numpy as np
 from .exclusion import _exclude_in_place
 from .gauss_seidel import cg_work, sweeps_apply
 from .ldl import small_layouts
+from .sparse import _CompiledCSR
 from .reused import RATE_WINDOW, REFACTOR_ITERATIONS, KeptFactors, RefactorRate
 from .system import _System
 
@@ -74,30 +75,33 @@ class CgTrial:
     they were: over its first :data:`.reused.RATE_WINDOW` steps, CG's work
     (:func:`.gauss_seidel.cg_work`) may be at most the kept factors' over their last window
     (:attr:`.reused.RefactorRate.per_step`, their remaking counted); more, and the run goes back
-    to kept factors for good.  CG is tried where the kept factors went stale, and after their
-    first window where CG would take symmetric Gauss-Seidel (:mod:`.gauss_seidel`).  (A
-    checkpoint without the kept factors' work takes the old bound: as many iterations a solve as
-    the kept factors cost at their most in products, :meth:`limit`.)
+    to kept factors.  CG is tried after the kept factors' first window where it would take
+    symmetric Gauss-Seidel (:mod:`.gauss_seidel`), and again, once, if the kept factors go stale
+    after that trial was lost.  A CG on Jacobi or the tensor preconditioner (tried only where the
+    factors went stale), and a trial from an older checkpoint, may take at most as many
+    iterations a solve as the kept factors cost at their most in products (:meth:`limit`).
 
     Measured, ms a step on kept factors against CG, and the verdict: q1's block at 1e4 points
     1.79 against 1.18, CG; the cantilever at h = 0.0625, whose kept factors take one iteration
     an acceleration, q1 2.71 against 2.95 and open-knot quadratic splines 4.9 against 7.6, kept
-    factors; the drifting bar at h = 0.05, q1 2.23 against 1.50, CG."""
+    factors; the drifting bar at h = 0.05, q1 2.23 against 1.47-1.59, CG."""
 
     fill: float = 0.0  # entries of the last kept factors per entry of their matrix
     start: int | None = None  # the mass's CG iterations when the trial began (None: not begun)
     steps: int = 0
     verdict: bool | None = None  # True: CG for the rest of the run; False: kept factors
+    sweeps: bool = True  # the CG tried is symmetric Gauss-Seidel's (else judged by :meth:`limit`)
+    stale: bool = False  # begun because the kept factors went stale
 
     def limit(self) -> float:
         """CG's iterations a solve at which it costs what the kept factors did at their most."""
         return (REFACTOR_ITERATIONS + 1) * self.fill + REFACTOR_ITERATIONS
 
-    def begin(self, iterations: int) -> None:
+    def begin(self, iterations: int, sweeps: bool, stale: bool) -> None:
         """A step on CG instead of kept factors with the mass's CG iterations so far: the
         trial's first, if not begun."""
         if self.start is None:
-            self.start = iterations
+            self.start, self.sweeps, self.stale = iterations, sweeps, stale
 
     def observe(self, iterations: int, solves_per_step: int, kept_per_step: float | None) -> None:
         """At a step's start, once begun: the mass's CG iterations so far."""
@@ -106,18 +110,21 @@ class CgTrial:
         self.steps += 1
         if self.steps == RATE_WINDOW:
             taken = iterations - self.start
-            if kept_per_step is not None:
+            if self.sweeps and kept_per_step is not None:
                 self.verdict = bool(cg_work(solves_per_step * RATE_WINDOW, taken) <= kept_per_step * RATE_WINDOW)
-            else:  # (no fill measured, no limit: CG stays)
+            else:  # Jacobi or the tensor preconditioner, or an older checkpoint (no fill measured: CG stays)
                 self.verdict = bool(not self.fill or taken <= self.limit() * RATE_WINDOW * solves_per_step)
 
     def values(self) -> list:
-        return [self.fill, self.start, self.steps, self.verdict]
+        return [self.fill, self.start, self.steps, self.verdict, self.sweeps, self.stale]
 
     @classmethod
     def restored(cls, values: list | None) -> "CgTrial":
-        return cls() if values is None else cls(float(values[0]), None if values[1] is None else int(values[1]),
-                                                int(values[2]), None if values[3] is None else bool(values[3]))
+        if values is None:
+            return cls()
+        sweeps, stale = (bool(values[4]), bool(values[5])) if len(values) > 4 else (False, True)  # (older: stale, limit)
+        return cls(float(values[0]), None if values[1] is None else int(values[1]), int(values[2]),
+                   None if values[3] is None else bool(values[3]), sweeps, stale)
 
 
 @dataclass
@@ -147,15 +154,19 @@ class RunChoices:
         self.trial.observe(iterations, solves, self.rate.per_step)
         if layout.stale_cg and self.trial.verdict is False:  # CG took more than the kept factors did
             layout.direct, layout.stale_cg = True, False
+            self.rate.restart()
+        if stale and self.trial.verdict is False and not self.trial.stale:  # lost before they went stale: again
+            self.trial = CgTrial(fill=self.trial.fill)
         keeps_factors = auto and layout.direct
         # CG is tried where the factors went stale, or once they were measured over a window if CG
         # would sweep (symmetric Gauss-Seidel: its iterations are a third of Jacobi's)
-        sweeps = not tensor_preconditioner and sweeps_apply(matrix)
+        # (the scipy path's systems are new CSR matrices, sorted, every diagonal stored)
+        sweeps = not tensor_preconditioner and (sweeps_apply(matrix) or not isinstance(matrix, _CompiledCSR))
         try_cg = (stale or (sweeps and self.rate.per_step is not None)) and self.trial.verdict is not False
         systems, correction, kept = make_systems(matrix, diagonal_index, layout, kept, weak, keeps_factors,
                                                  tensor_preconditioner and self.tensor_cg is None, stale, try_cg)
         if layout.stale_cg:
-            self.trial.begin(iterations)
+            self.trial.begin(iterations, sweeps, stale)
         if layout.fill is not None and self.tensor_cg is None:
             self.tensor_cg = not layout.direct
         on_kept = keeps_factors and layout.direct and not stale

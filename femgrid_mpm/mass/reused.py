@@ -70,37 +70,47 @@ class RefactorRate:
     steps: int = 0
     refactors: int = 0
     stale: bool = False
-    start: int | None = None  # the mass's CG iterations when the window began
+    start: int | None = None  # the mass's CG iterations when the count of iterations began
     per_step: float | None = None
+    counted: int = 0  # the steps whose iterations are in the count (observed at a step's start)
 
     def observe(self, refactored: bool, iterations: int = 0, solves: int = 2, fill: float = 0.0) -> None:
-        """One step of systems on kept factors: whether they were made again, the mass's CG
-        iterations so far, the solves a step and the factors' entries per matrix entry."""
+        """One step of systems on kept factors, at its start: whether they were made again, the
+        mass's CG iterations so far, the solves a step and the factors' entries per matrix entry."""
         if self.stale:
             return
-        if self.start is None:
-            self.start = iterations
+        if self.start is None:  # this step's own iterations are not in yet
+            self.start, self.counted = iterations, -1
         self.steps += 1
+        self.counted += 1
         self.refactors += bool(refactored)
         if self.steps == RATE_WINDOW:
             self.stale = self.refactors >= RATE_LIMIT * RATE_WINDOW
-            # (the first window's first step made the factors the run needs whatever follows)
+            # the run's first window: its first step made the factors the run needs whatever follows
             remade = self.refactors - (self.per_step is None and self.refactors > 0)
-            work = kept_work(solves * RATE_WINDOW, iterations - self.start, remade, fill)
-            self.per_step = work / RATE_WINDOW
-            self.steps, self.refactors, self.start = 0, 0, iterations
+            if self.counted > 0:
+                work = kept_work(solves * self.counted, iterations - self.start,
+                                 remade * self.counted / RATE_WINDOW, fill)
+                self.per_step = work / self.counted
+            self.steps, self.refactors, self.start, self.counted = 0, 0, iterations, 0
+
+    def restart(self) -> None:
+        """The kept factors taken up again after CG: a new window (CG's iterations not in it)."""
+        self.steps, self.refactors, self.start, self.counted = 0, 0, None, 0
 
     def values(self) -> list:
         """A checkpoint's values (:meth:`restored`)."""
-        return [self.steps, self.refactors, self.stale, self.start, self.per_step]
+        return [self.steps, self.refactors, self.stale, self.start, self.per_step, self.counted]
 
     @classmethod
     def restored(cls, values: list | None) -> "RefactorRate":
         if values is None:
             return cls()
-        start, per_step = (values[3], values[4]) if len(values) > 3 else (None, None)  # (older checkpoints)
+        if len(values) <= 3:  # (an older checkpoint: the iterations of its window so far are not known)
+            return cls(int(values[0]), int(values[1]), bool(values[2]))
+        start, per_step = values[3], values[4]
         return cls(int(values[0]), int(values[1]), bool(values[2]), None if start is None else int(start),
-                   None if per_step is None else float(per_step))
+                   None if per_step is None else float(per_step), int(values[5]))
 
 
 def kept_work(solves: int, iterations: int, refactors: int, fill: float) -> float:

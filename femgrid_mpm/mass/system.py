@@ -55,6 +55,7 @@ class _System:
         if diagonal_index is None:
             keep = sp.diags((~excluded).astype(float))
             reduced = (keep @ matrix @ keep + sp.diags(excluded.astype(float))).tocsr()
+            reduced.sort_indices()  # every diagonal stored: symmetric Gauss-Seidel sweeps it (.gauss_seidel)
             inverse_diagonal = 1.0 / reduced.diagonal()
         else:  # the same on a structure with every diagonal entry: zero rows and columns, unit diagonal
             data = matrix.data
@@ -94,6 +95,7 @@ class _System:
             return
         kept_target = np.where(self.excluded, 1.0, target)
         self.matrix = ((1.0 - weight) * self.matrix + weight * sp.diags(kept_target)).tocsr()
+        self.matrix.sort_indices()
         self.inverse_diagonal = 1.0 / self.matrix.diagonal()
         self.factors = _factor(self.matrix) if direct else None
         self.ldl = None
