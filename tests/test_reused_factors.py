@@ -12,8 +12,8 @@ import scipy.sparse.linalg as spla
 
 from femgrid_mpm.mass import layout, ldl
 from femgrid_mpm.mass.direct import _factor
-from femgrid_mpm.mass.reused import (RATE_LIMIT, RATE_WINDOW, REFACTOR_ITERATIONS, RefactorRate, ReusedFactors,
-                                     kept_work)
+from femgrid_mpm.mass.reused import REFACTOR_ITERATIONS, ReusedFactors
+from femgrid_mpm.mass.trial import RATE_LIMIT, RATE_WINDOW, RefactorRate, kept_work
 from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
 from helpers import advanced_benchmark_block, benchmark_block

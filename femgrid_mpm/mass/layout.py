@@ -16,11 +16,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .exclusion import _exclude_in_place
-from .gauss_seidel import cg_work, sweeps_apply
+from .gauss_seidel import sweeps_apply
 from .ldl import small_layouts
+from .reused import KeptFactors
 from .sparse import _CompiledCSR
-from .reused import RATE_WINDOW, REFACTOR_ITERATIONS, KeptFactors, RefactorRate
 from .system import _System
+from .trial import CgTrial, RefactorRate
 
 #: largest number of active nodes for which "auto" factors the matrix
 DIRECT_LIMIT = 5000
@@ -70,70 +71,12 @@ class SystemsLayout:
 
 
 @dataclass
-class CgTrial:
-    """Whether CG, tried instead of the kept factors (:func:`make_systems`), is cheaper than
-    they were: over its first :data:`.reused.RATE_WINDOW` steps, CG's work
-    (:func:`.gauss_seidel.cg_work`) may be at most the kept factors' over their last window
-    (:attr:`.reused.RefactorRate.per_step`, their remaking counted); more, and the run goes back
-    to kept factors.  CG is tried after the kept factors' first window where it would take
-    symmetric Gauss-Seidel (:mod:`.gauss_seidel`), and again, once, if the kept factors go stale
-    after that trial was lost.  A CG on Jacobi or the tensor preconditioner (tried only where the
-    factors went stale), and a trial from an older checkpoint, may take at most as many
-    iterations a solve as the kept factors cost at their most in products (:meth:`limit`).
-
-    Measured, ms a step on kept factors against CG, and the verdict: q1's block at 1e4 points
-    1.79 against 1.18, CG; the cantilever at h = 0.0625, whose kept factors take one iteration
-    an acceleration, q1 2.71 against 2.95 and open-knot quadratic splines 4.9 against 7.6, kept
-    factors; the drifting bar at h = 0.05, q1 2.23 against 1.47-1.59, CG."""
-
-    fill: float = 0.0  # entries of the last kept factors per entry of their matrix
-    start: int | None = None  # the mass's CG iterations when the trial began (None: not begun)
-    steps: int = 0
-    verdict: bool | None = None  # True: CG for the rest of the run; False: kept factors
-    sweeps: bool = True  # the CG tried is symmetric Gauss-Seidel's (else judged by :meth:`limit`)
-    stale: bool = False  # begun because the kept factors went stale
-
-    def limit(self) -> float:
-        """CG's iterations a solve at which it costs what the kept factors did at their most."""
-        return (REFACTOR_ITERATIONS + 1) * self.fill + REFACTOR_ITERATIONS
-
-    def begin(self, iterations: int, sweeps: bool, stale: bool) -> None:
-        """A step on CG instead of kept factors with the mass's CG iterations so far: the
-        trial's first, if not begun."""
-        if self.start is None:
-            self.start, self.sweeps, self.stale = iterations, sweeps, stale
-
-    def observe(self, iterations: int, solves_per_step: int, kept_per_step: float | None) -> None:
-        """At a step's start, once begun: the mass's CG iterations so far."""
-        if self.start is None or self.verdict is not None:
-            return
-        self.steps += 1
-        if self.steps == RATE_WINDOW:
-            taken = iterations - self.start
-            if self.sweeps and kept_per_step is not None:
-                self.verdict = bool(cg_work(solves_per_step * RATE_WINDOW, taken) <= kept_per_step * RATE_WINDOW)
-            else:  # Jacobi or the tensor preconditioner, or an older checkpoint (no fill measured: CG stays)
-                self.verdict = bool(not self.fill or taken <= self.limit() * RATE_WINDOW * solves_per_step)
-
-    def values(self) -> list:
-        return [self.fill, self.start, self.steps, self.verdict, self.sweeps, self.stale]
-
-    @classmethod
-    def restored(cls, values: list | None) -> "CgTrial":
-        if values is None:
-            return cls()
-        sweeps, stale = (bool(values[4]), bool(values[5])) if len(values) > 4 else (False, True)  # (older: stale, limit)
-        return cls(float(values[0]), None if values[1] is None else int(values[1]), int(values[2]),
-                   None if values[3] is None else bool(values[3]), sweeps, stale)
-
-
-@dataclass
 class RunChoices:
     """What "auto" measured during the run and keeps to its end (and in checkpoints, so that a
     resumed run chooses alike): whether cubic splines solve by CG on the tensor preconditioner
     (``tensor_cg``, decided at the run's first SuperLU factorization: :data:`FILL_LIMIT`; the fill
     moves with the points, so it is not measured again), how often the kept factors were made
-    again (:class:`.reused.RefactorRate`; too often: cheap small systems are factored every step,
+    again (:class:`.trial.RefactorRate`; too often: cheap small systems are factored every step,
     the others solved by CG, see :func:`make_systems`) and whether that CG pays (:class:`CgTrial`)."""
 
     tensor_cg: bool | None = None
@@ -159,8 +102,8 @@ class RunChoices:
             self.trial = CgTrial(fill=self.trial.fill)
         keeps_factors = auto and layout.direct
         # CG is tried where the factors went stale, or once they were measured over a window if CG
-        # would sweep (symmetric Gauss-Seidel: its iterations are a third of Jacobi's)
-        # (the scipy path's systems are new CSR matrices, sorted, every diagonal stored)
+        # would sweep (symmetric Gauss-Seidel: a third of Jacobi's iterations); the scipy path's
+        # systems are new CSR matrices, sorted, every diagonal stored
         sweeps = not tensor_preconditioner and (sweeps_apply(matrix) or not isinstance(matrix, _CompiledCSR))
         try_cg = (stale or (sweeps and self.rate.per_step is not None)) and self.trial.verdict is not False
         systems, correction, kept = make_systems(matrix, diagonal_index, layout, kept, weak, keeps_factors,
@@ -178,8 +121,8 @@ class RunChoices:
                 if factors is not None and (system.kept is None or not self.trial.fill):
                     self.trial.fill = factors.entries / max(int(np.count_nonzero(system.matrix.data)), 1)
         if on_kept and on_kept_factors:  # were their factors made again (this step's own L D L^T or SuperLU's)?
-            refactored = sum(system.ldl is not None or system.factors is not None for system in on_kept_factors)
-            self.rate.observe(refactored > 0, iterations, solves, self.trial.fill)
+            refactored = any(system.ldl is not None or system.factors is not None for system in on_kept_factors)
+            self.rate.observe(refactored, iterations, solves, self.trial.fill)
         return systems, correction, kept
 
     def values(self) -> dict:
@@ -205,7 +148,7 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
     factors are measured (``layout.fill``) and, above :data:`FILL_LIMIT`, the layout is solved by
     that CG instead (not direct): :class:`RunChoices` keeps the decision for the run, since the
     fill moves with the points (their couplings' zeros) while the layout stays.
-    ``stale``: the kept factors were made again at too many steps (:class:`.reused.RefactorRate`):
+    ``stale``: the kept factors were made again at too many steps (:class:`.trial.RefactorRate`):
     the small systems that factor cheaply are factored every step.  ``try_cg`` (stale, or CG
     would sweep, and :class:`CgTrial` has not found CG dearer): a layout with systems not
     factored every step (SuperLU's, or small ones that factor slowly) is solved by CG instead

@@ -44,7 +44,7 @@ EVERY_STEP_NODES = 1500
 #: 140 us), cubic splines 58 and gimp 37 (factor 600 and 240 us) are left to the kept factors
 EVERY_STEP_WORK = 24
 #: ... or this many where the kept factors are made again at most steps anyway
-#: (:class:`.reused.RefactorRate`): gimp at 1e3 points (37.7) 0.73-0.75 -> 0.55-0.62 ms a step
+#: (:class:`.trial.RefactorRate`): gimp at 1e3 points (37.7) 0.73-0.75 -> 0.55-0.62 ms a step
 #: factored every step, at 4e3 points (72.4) 3.66 -> 4.45 ms
 STALE_WORK = 48
 
@@ -130,7 +130,7 @@ class SymbolicLDL:
     @property
     def every_step_when_stale(self) -> bool:
         """The same where the kept factors are made again at most steps anyway
-        (:class:`.reused.RefactorRate`, :data:`STALE_WORK`)."""
+        (:class:`.trial.RefactorRate`, :data:`STALE_WORK`)."""
         return self.factors_within(STALE_WORK)
 
     @property

@@ -1,0 +1,155 @@
+"""What "auto" measures of the kept factors and of CG during a run, to choose between them.
+
+:class:`RefactorRate` counts how often the kept factors (:mod:`.reused`) are made again and
+what their solves cost, :class:`CgTrial` what CG costs over its first steps instead of them
+(:mod:`.gauss_seidel`'s work model); :class:`.layout.RunChoices` keeps both to the run's end
+and in its checkpoints.  Both count the run's steps and iterations, not the machine's time, so
+that a run and its resumption choose alike.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .gauss_seidel import cg_work
+from .reused import REFACTOR_ITERATIONS
+
+
+#: steps over which :class:`RefactorRate` counts the refactorizations of the kept factors ...
+RATE_WINDOW = 20
+#: ... and the share of them at or above which the kept factors count as stale for the run
+RATE_LIMIT = 0.4
+
+
+#: a refactorization of kept factors in solves with them: SuperLU's factorization and its
+#: conversion took 33-59 times one solve of two columns with the factors it made (q1, q2,
+#: serendipity at 5e3 and 1e4 points, quadratic splines at 1e4; 2-6 ms)
+REFACTOR_SOLVES = 35
+
+
+@dataclass
+class RefactorRate:
+    """How often the kept factors are made again, and what they cost; once they are made again
+    in :data:`RATE_LIMIT` of :data:`RATE_WINDOW` steps (``stale``), CG's iterations on factors
+    that keep going stale buy nothing: for the rest of the run the small systems that factor
+    cheaply enough (:data:`.ldl.STALE_WORK`) are factored every step, and the others are solved
+    by CG without factors while it costs less (:func:`.layout.make_systems`, :class:`CgTrial`).
+
+    ``per_step``: the work of the kept factors' solves and refactorizations a step over the
+    last full window, in products with the matrix (:meth:`observe`), against which CG is tried.
+
+    GIMP's block made its kept factors again at 93 of 200 steps at 1e3 points, at ~85 of 200
+    from 2.5e3 to 1e4 (a solve took more than :data:`REFACTOR_ITERATIONS`, or the weak nodes
+    changed); cubic splines' at 16 of 200, q2's at 26 of 200 at 5e3 points, q1's at 1e4 points
+    once.  The count is of the run's steps, not of the machine's speed, and it is in the
+    checkpoint: a run and its resumption decide alike."""
+
+    steps: int = 0
+    refactors: int = 0
+    stale: bool = False
+    start: int | None = None  # the mass's CG iterations when the count of iterations began
+    per_step: float | None = None
+    counted: int = 0  # the steps whose iterations are in the count (observed at a step's start)
+
+    def observe(self, refactored: bool, iterations: int = 0, solves: int = 2, fill: float = 0.0) -> None:
+        """One step of systems on kept factors, at its start: whether they were made again, the
+        mass's CG iterations so far, the solves a step and the factors' entries per matrix entry."""
+        if self.stale:
+            return
+        if self.start is None:  # this step's own iterations are not in yet
+            self.start, self.counted = iterations, -1
+        self.steps += 1
+        self.counted += 1
+        self.refactors += bool(refactored)
+        if self.steps == RATE_WINDOW:
+            self.stale = self.refactors >= RATE_LIMIT * RATE_WINDOW
+            # the run's first window: its first step made the factors the run needs whatever follows
+            remade = self.refactors - (self.per_step is None and self.refactors > 0)
+            if self.counted > 0:
+                work = kept_work(solves * self.counted, iterations - self.start,
+                                 remade * self.counted / RATE_WINDOW, fill)
+                self.per_step = work / self.counted
+            self.steps, self.refactors, self.start, self.counted = 0, 0, iterations, 0
+
+    def restart(self) -> None:
+        """The kept factors taken up again after CG: a new window (CG's iterations not in it)."""
+        self.steps, self.refactors, self.start, self.counted = 0, 0, None, 0
+
+    def values(self) -> list:
+        """A checkpoint's values (:meth:`restored`)."""
+        return [self.steps, self.refactors, self.stale, self.start, self.per_step, self.counted]
+
+    @classmethod
+    def restored(cls, values: list | None) -> "RefactorRate":
+        if values is None:
+            return cls()
+        if len(values) <= 3:  # (an older checkpoint: the iterations of its window so far are not known)
+            return cls(int(values[0]), int(values[1]), bool(values[2]))
+        start, per_step = values[3], values[4]
+        return cls(int(values[0]), int(values[1]), bool(values[2]), None if start is None else int(start),
+                   None if per_step is None else float(per_step), int(values[5]))
+
+
+def kept_work(solves: int, iterations: int, refactors: int, fill: float) -> float:
+    """The work of solves on kept factors holding ``fill`` entries per matrix entry, in products
+    with the matrix: each solve a product and a solve with the factors, and as many again for
+    each of its ``iterations``; each refactorization :data:`REFACTOR_SOLVES` solves."""
+    return (solves + iterations) * (fill + 1.0) + refactors * REFACTOR_SOLVES * fill
+
+
+@dataclass
+class CgTrial:
+    """Whether CG, tried instead of the kept factors (:func:`.layout.make_systems`), is cheaper than
+    they were: over its first :data:`RATE_WINDOW` steps, CG's work
+    (:func:`.gauss_seidel.cg_work`) may be at most the kept factors' over their last window
+    (:attr:`RefactorRate.per_step`, their remaking counted); more, and the run goes back
+    to kept factors.  CG is tried after the kept factors' first window where it would take
+    symmetric Gauss-Seidel (:mod:`.gauss_seidel`), and again, once, if the kept factors go stale
+    after that trial was lost.  A CG on Jacobi or the tensor preconditioner (tried only where the
+    factors went stale), and a trial from an older checkpoint, may take at most as many
+    iterations a solve as the kept factors cost at their most in products (:meth:`limit`).
+
+    Measured, ms a step on kept factors against CG, and the verdict: q1's block at 1e4 points
+    1.79 against 1.18, CG; the cantilever at h = 0.0625, whose kept factors take one iteration
+    an acceleration, q1 2.71 against 2.95 and open-knot quadratic splines 4.9 against 7.6, kept
+    factors; the drifting bar at h = 0.05, q1 2.23 against 1.47-1.59, CG."""
+
+    fill: float = 0.0  # entries of the last kept factors per entry of their matrix
+    start: int | None = None  # the mass's CG iterations when the trial began (None: not begun)
+    steps: int = 0
+    verdict: bool | None = None  # True: CG for the rest of the run; False: kept factors
+    sweeps: bool = True  # the CG tried is symmetric Gauss-Seidel's (else judged by :meth:`limit`)
+    stale: bool = False  # begun because the kept factors went stale
+
+    def limit(self) -> float:
+        """CG's iterations a solve at which it costs what the kept factors did at their most."""
+        return (REFACTOR_ITERATIONS + 1) * self.fill + REFACTOR_ITERATIONS
+
+    def begin(self, iterations: int, sweeps: bool, stale: bool) -> None:
+        """A step on CG instead of kept factors with the mass's CG iterations so far: the
+        trial's first, if not begun."""
+        if self.start is None:
+            self.start, self.sweeps, self.stale = iterations, sweeps, stale
+
+    def observe(self, iterations: int, solves_per_step: int, kept_per_step: float | None) -> None:
+        """At a step's start, once begun: the mass's CG iterations so far."""
+        if self.start is None or self.verdict is not None:
+            return
+        self.steps += 1
+        if self.steps == RATE_WINDOW:
+            taken = iterations - self.start
+            if self.sweeps and kept_per_step is not None:
+                self.verdict = bool(cg_work(solves_per_step * RATE_WINDOW, taken) <= kept_per_step * RATE_WINDOW)
+            else:  # Jacobi or the tensor preconditioner, or an older checkpoint (no fill measured: CG stays)
+                self.verdict = bool(not self.fill or taken <= self.limit() * RATE_WINDOW * solves_per_step)
+
+    def values(self) -> list:
+        return [self.fill, self.start, self.steps, self.verdict, self.sweeps, self.stale]
+
+    @classmethod
+    def restored(cls, values: list | None) -> "CgTrial":
+        if values is None:
+            return cls()
+        sweeps, stale = (bool(values[4]), bool(values[5])) if len(values) > 4 else (False, True)  # (older: stale, limit)
+        return cls(float(values[0]), None if values[1] is None else int(values[1]), int(values[2]),
+                   None if values[3] is None else bool(values[3]), sweeps, stale)
