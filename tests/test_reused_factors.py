@@ -272,3 +272,21 @@ def test_stale_cg_that_costs_more_than_the_factors_goes_back_to_them():
     mass = against_direct(scene, windows=3).mass
     trial = mass._choices.trial
     assert mass._choices.rate.stale and trial.verdict is False and mass._direct and mass._kept
+
+
+def test_kept_factors_that_go_stale_after_a_lost_trial_are_tried_again():
+    """q1 on the clamped cantilever (h = 0.25): its first trial of CG is lost (kept factors cost
+    less); if the kept factors then go stale (set here: remade at 8 or more of 20 steps), CG is
+    tried once more, and that trial is the last."""
+    cantilever = bundled_scene("cantilever").with_overrides(**{
+        "grid.basis": "q1", "grid.spacing": 0.25, "solver.mass": "consistent"})
+    simulation = Simulation(cantilever)
+    for _ in range(2 * RATE_WINDOW + 5):
+        simulation.advance()
+    choices = simulation.mass._choices
+    assert choices.trial.verdict is False and not choices.trial.stale and simulation.mass._direct
+    choices.rate.stale = True
+    for _ in range(RATE_WINDOW + 5):
+        simulation.advance()
+    assert choices.trial.stale and choices.trial.start is not None and choices.trial.verdict is not None
+
