@@ -85,9 +85,8 @@ class RefactorRate:
             return cls()
         if len(values) <= 3:  # (an older checkpoint: the iterations of its window so far are not known)
             return cls(int(values[0]), int(values[1]), bool(values[2]))
-        start, per_step = values[3], values[4]
-        return cls(int(values[0]), int(values[1]), bool(values[2]), None if start is None else int(start),
-                   None if per_step is None else float(per_step), int(values[5]))
+        return cls(int(values[0]), int(values[1]), bool(values[2]), _or_none(int, values[3]),
+                   _or_none(float, values[4]), int(values[5]))
 
 
 def kept_work(solves: int, iterations: int, refactors: int, fill: float) -> float:
@@ -151,5 +150,10 @@ class CgTrial:
         if values is None:
             return cls()
         sweeps, stale = (bool(values[4]), bool(values[5])) if len(values) > 4 else (False, True)  # (older: stale, limit)
-        return cls(float(values[0]), None if values[1] is None else int(values[1]), int(values[2]),
-                   None if values[3] is None else bool(values[3]), sweeps, stale)
+        return cls(float(values[0]), _or_none(int, values[1]), int(values[2]), _or_none(bool, values[3]), sweeps, stale)
+
+
+def _or_none(cast, value):
+    """A checkpoint's value as ``cast`` (JSON keeps ints, floats and bools apart only loosely), None kept."""
+    return None if value is None else cast(value)
+
