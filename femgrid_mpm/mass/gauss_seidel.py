@@ -100,11 +100,14 @@ def _gauss_seidel_cg(indptr, indices, data, upper_start, half, b, x0, rtol, max_
             for i in range(n):
                 x[i, c] = 0.0
     s = np.empty_like(b)  # D^1/2 r^ = D (D + L)^-1 r
-    _product_dot(indptr, indices, data, half, x, s, np.zeros(k))
-    for i in range(n):
-        for c in range(k):
-            s[i, c] = b[i, c] - s[i, c]
-    _sweep_down(indptr, indices, data, upper_start, inverse, s, s, s, False, np.zeros(k))
+    if k == 2 and half.shape[0] > 0:
+        _residual_down(indptr, indices, data, upper_start, inverse, b, x, s)
+    else:
+        _product_dot(indptr, indices, data, half, x, s, np.zeros(k))
+        for i in range(n):
+            for c in range(k):
+                s[i, c] = b[i, c] - s[i, c]
+        _sweep_down(indptr, indices, data, upper_start, inverse, s, s, s, False, np.zeros(k))
     rr = np.zeros(k)  # r^ . r^
     size = np.zeros(k)  # max |x|
     for c in range(k):
@@ -137,6 +140,40 @@ def _gauss_seidel_cg(indptr, indices, data, upper_start, half, b, x0, rtol, max_
         t, previous = previous, t
         _sweep_up(indptr, indices, data, upper_start, inverse, q, s, beta, t, previous, u, error)
     return x, False, max_iterations
+
+
+@compiled(inline="always")
+def _residual_down(indptr, indices, data, upper_start, inverse, b, x, w):
+    """``w = (D + L)^-1 (b - A x)`` for two columns in one pass down the stored half: row ``i``
+    gathers its later columns' ``a_ij x_j``, has every earlier row's ``a_li (x_l + w_l)`` already,
+    and passes on ``a_ij (x_i + w_i)``: the product's and the sweep's scatters are one (a product
+    and a sweep read the matrix twice; at 1e6 points the passes are bound by memory)."""
+    n = x.shape[0]
+    one = np.uint64(1)
+    for i in range(n):
+        w[i, 0] = 0.0
+        w[i, 1] = 0.0
+    for i in range(n):
+        diagonal = np.uint64(upper_start[i])
+        stop = np.uint64(indptr[i + 1])
+        x0 = x[i, 0]
+        x1 = x[i, 1]
+        a0 = data[diagonal] * x0
+        a1 = data[diagonal] * x1
+        for entry in range(diagonal + one, stop):
+            j = np.uint64(indices[entry])
+            a0 = fused(data[entry], x[j, 0], a0)
+            a1 = fused(data[entry], x[j, 1], a1)
+        w0 = ((b[i, 0] - a0) - w[i, 0]) * inverse[i]
+        w1 = ((b[i, 1] - a1) - w[i, 1]) * inverse[i]
+        w[i, 0] = w0
+        w[i, 1] = w1
+        y0 = x0 + w0
+        y1 = x1 + w1
+        for entry in range(diagonal + one, stop):
+            j = np.uint64(indices[entry])
+            w[j, 0] = fused(data[entry], y0, w[j, 0])
+            w[j, 1] = fused(data[entry], y1, w[j, 1])
 
 
 @compiled(inline="always")
