@@ -28,7 +28,7 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=
     that is not positive definite) stops it with ``converged = None``.
     """
     if tensor is None and layer is None and sweeps_apply(A):
-        return gauss_seidel_cg(A, b, x0, rtol, max_iterations)
+        return gauss_seidel_cg(A, b, x0, rtol, max_iterations, inverse_diagonal)
     if isinstance(A, _CompiledCSR) and layer is None:
         return _compiled_cg(A.indptr, A.indices, A.data, A.upper_start_or_none(), np.ascontiguousarray(b, dtype=float),
                             np.ascontiguousarray(x0, dtype=float), inverse_diagonal, rtol, max_iterations,

@@ -27,15 +27,12 @@ points* are right), but internal forces in general do not, and velocity
 Linear solver: ``"direct"`` factors the matrix once per step with SuperLU
 (:mod:`.direct`; both solves of the step reuse the factors) and checks every
 solution's residual, because SuperLU returns garbage without warning on a
-singular matrix.  ``"cg"`` is preconditioned CG (:mod:`.cg`; Jacobi, or for
-cubic splines a tensor Gram preconditioner completed by an exact solve in a
-layer along the bodies' edges, :mod:`.preconditioners`), warm-started from
-the last step.  ``"auto"`` takes direct up to 5000 active nodes (exact, and
-its pivots detect a singular matrix; the paper's problems), and CG above;
-below it, the factors are kept over the steps as the preconditioner of CG
-(:mod:`.reused`), refactored when they no longer fit, except for cubic splines
-whose factors fill more than :data:`.layout.FILL_LIMIT`: CG on the tensor
-preconditioner is faster there.
+singular matrix.  ``"cg"`` is preconditioned CG warm-started from the last
+steps (:mod:`.cg`: symmetric Gauss-Seidel, :mod:`.gauss_seidel`; for cubic
+splines a tensor Gram preconditioner, :mod:`.preconditioners`).  ``"auto"``
+factors up to 5000 active nodes: small systems every step (:mod:`.ldl`), the
+others kept as CG's preconditioner (:mod:`.reused`) while they pay against CG
+(:mod:`.trial`, :mod:`.layout`).
 """
 
 from __future__ import annotations
@@ -290,20 +287,18 @@ class ConsistentMass(MassModel):
         if moving and self.fixed is not None:
             coupling = self.apply(np.where(self.fixed, frame, 0.0))
         for system in self._systems:
+            whole = len(system.columns) == rhs.shape[1]  # the one system: no copies of the columns
             if system.ldl is not None and coupling is None and (self._mix_excess is None or not moving):
                 # this step's exact factors, which read the free rows only and are zero elsewhere
-                if len(system.columns) == rhs.shape[1]:  # the one system (no copies of the columns)
-                    solution = system.ldl.solve(rhs)
-                else:
-                    solution[:, system.columns] = system.ldl.solve(rhs[:, system.columns])
-                continue
-            columns = np.asarray(system.columns, dtype=np.int64)
-            part, nonzero = free_part(np.ascontiguousarray(rhs, dtype=float), columns, system.excluded)
-            coupled = None if coupling is None else free_part(coupling, columns, system.excluded)[0]
-            if not nonzero and (coupled is None or not coupled.any()):  # e.g. the relative momentum of a rigid motion
-                continue
-            solved = self._solve_system(system, part, kind, coupled, frame[system.columns] if moving else None)
-            if len(system.columns) == rhs.shape[1]:  # the one system: its solution is the whole
+                solved = system.ldl.solve(rhs if whole else rhs[:, system.columns])
+            else:
+                columns = np.asarray(system.columns, dtype=np.int64)
+                part, nonzero = free_part(np.ascontiguousarray(rhs, dtype=float), columns, system.excluded)
+                coupled = None if coupling is None else free_part(coupling, columns, system.excluded)[0]
+                if not nonzero and (coupled is None or not coupled.any()):  # e.g. a rigid motion's relative momentum
+                    continue
+                solved = self._solve_system(system, part, kind, coupled, frame[system.columns] if moving else None)
+            if whole:
                 solution = solved
             else:
                 solution[:, system.columns] = solved

@@ -18,9 +18,11 @@ are scaled by ``D^1/2`` (``q = D^1/2 p^``, ``s = D^1/2 r^``), so no square root 
 
 Converged: in every column ``max |z| <= rtol max |x|``, ``z`` close to the error of ``x``
 (as in :mod:`.reused`): the velocities are accurate to ``rtol`` of the largest,
-whatever the bodies' masses.  The matrix is the mass pattern's, stored in stencil order
-with the entries after each row's diagonal those of larger columns (``upper_start``,
-:class:`.sparse._CompiledCSR`); both sweeps read that half only.
+whatever the bodies' masses (``z`` is the error times ``P^-1 A``: below it by up to the
+smallest eigenvalue of ``P^-1 A``, docs/performance.md).  Both sweeps read the entries after
+each row's diagonal only: the mass pattern's stored half, in stencil order (``upper_start``,
+:class:`.sparse._CompiledCSR`), or the upper triangle of a CSR matrix with sorted columns
+(:func:`sweep_layout`).
 """
 
 from __future__ import annotations
@@ -65,14 +67,31 @@ def sweeps_apply(matrix) -> bool:
     return sweep_layout(matrix) is not None
 
 
-def gauss_seidel_cg(matrix, b: np.ndarray, x0: np.ndarray, rtol: float,
-                    max_iterations: int) -> tuple[np.ndarray, bool, int]:
+def gauss_seidel_cg(matrix, b: np.ndarray, x0: np.ndarray, rtol: float, max_iterations: int,
+                    inverse_diagonal: np.ndarray | None = None) -> tuple[np.ndarray, bool, int]:
     """CG on ``matrix x = b`` (b (n, k)) from ``x0``: ``(x, converged, iterations)``; a
-    non-positive curvature (a singular matrix) stops it as not converged."""
+    non-positive curvature (a singular matrix) stops it as not converged.  ``inverse_diagonal``:
+    ``1 / diag(matrix)`` where the caller has it (a system's, made with it)."""
     diagonal, half = sweep_layout(matrix)
-    return _gauss_seidel_cg(matrix.indptr, matrix.indices, matrix.data, diagonal, half,
+    if inverse_diagonal is None:
+        inverse_diagonal = 1.0 / matrix.data[diagonal]
+    return _gauss_seidel_cg(matrix.indptr, matrix.indices, matrix.data, diagonal, half, inverse_diagonal,
                             np.ascontiguousarray(b, dtype=float), np.ascontiguousarray(x0, dtype=float),
                             rtol, max_iterations)
+
+
+@compiled(inline="always")
+def zero_columns(b, x):
+    """``x``'s columns zero where ``b``'s are (a zero right-hand side: the solution is zero)."""
+    n, k = b.shape
+    for c in range(k):
+        zero = True
+        for i in range(n):
+            if b[i, c] != 0.0:
+                zero = False
+        if zero:
+            for i in range(n):
+                x[i, c] = 0.0
 
 
 @compiled(inline="always")
@@ -85,20 +104,10 @@ def errors_within(error, size, rtol) -> bool:
 
 
 @compiled()
-def _gauss_seidel_cg(indptr, indices, data, upper_start, half, b, x0, rtol, max_iterations):
+def _gauss_seidel_cg(indptr, indices, data, upper_start, half, inverse, b, x0, rtol, max_iterations):
     n, k = b.shape
     x = x0.copy()
-    inverse = np.empty(n)
-    for i in range(n):
-        inverse[i] = 1.0 / data[upper_start[i]]
-    for c in range(k):  # a zero right-hand side: the solution is zero
-        zero = True
-        for i in range(n):
-            if b[i, c] != 0.0:
-                zero = False
-        if zero:
-            for i in range(n):
-                x[i, c] = 0.0
+    zero_columns(b, x)
     s = np.empty_like(b)  # D^1/2 r^ = D (D + L)^-1 r
     if k == 2 and half.shape[0] > 0:
         _residual_down(indptr, indices, data, upper_start, inverse, b, x, s)

@@ -25,7 +25,7 @@ import scipy.sparse as sp
 
 from ..kernels.arithmetic import fused
 from ..kernels.compiled import compiled
-from .gauss_seidel import errors_within
+from .gauss_seidel import errors_within, zero_columns
 from .sparse import _ROW_BY_ROW, _CompiledCSR, _product_dot
 
 #: more iterations than this in a solve with the kept factors: refactor at the next step
@@ -286,6 +286,7 @@ def _factor_preconditioned_cg(indptr, indices, data, upper_start, b, x0, rtol, m
     non-positive curvature or ``r.z`` stops it as not converged."""
     n, k = b.shape
     x = x0.copy()
+    zero_columns(b, x)
     r = np.empty_like(b)
     _product_dot(indptr, indices, data, upper_start, x, r, np.zeros(k))
     z = np.empty_like(b)
@@ -294,19 +295,9 @@ def _factor_preconditioned_cg(indptr, indices, data, upper_start, b, x0, rtol, m
     work = np.empty_like(b)
     rz = np.zeros(k)
     curvature = np.zeros(k)
-    zero = np.zeros(k, dtype=np.bool_)
-    for c in range(k):
-        zero[c] = True
     for i in range(n):
         for c in range(k):
             r[i, c] = b[i, c] - r[i, c]
-            if b[i, c] != 0.0:
-                zero[c] = False
-    for c in range(k):
-        if zero[c]:  # a zero right-hand side: the solution is zero
-            for i in range(n):
-                x[i, c] = 0.0
-                r[i, c] = 0.0
     for iteration in range(max_iterations + 1):
         _apply_factors(r, z, work, lower_indptr, lower_indices, lower_data, upper_indptr, upper_indices, upper_data,
                        upper_diagonal, row_permutation, column_permutation)
