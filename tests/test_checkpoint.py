@@ -96,6 +96,10 @@ CASES = {
     # between the checkpoints; the count towards it and CG's history carry over
     "gimp consistent, refactor rate to CG": (benchmark_block("gimp", "consistent", 6400, weak_fraction=0.1).with_overrides(
         **{"time.end": 2.0, "output.every": 10}), 20, None),
+    # the same at 1e3 points with dt = "auto": factored every step, then CG instead of the layouts'
+    # analyses (FactoredRate; its trial from step 81), interrupted at step 90, mid-trial
+    "gimp consistent, layouts to CG": (benchmark_block("gimp", "consistent", 1000).with_overrides(
+        **{"time.dt": "auto", "time.end": 7.8, "output.every": 45}), 45, None),
     # HRZ, a neo-Hookean body, gravity, a ramped point load and damping: the work ledger in order
     "q2 hrz, loads": (bundled_scene("cantilever_large").with_overrides(
         **{"grid.basis": "q2", "solver.mass": "hrz", "bodies.0.material.model": "neo_hookean", "time.end": 0.6,

@@ -13,7 +13,9 @@ import scipy.sparse.linalg as spla
 from femgrid_mpm.mass import layout, ldl
 from femgrid_mpm.mass.direct import _factor
 from femgrid_mpm.mass.reused import REFACTOR_ITERATIONS, ReusedFactors
-from femgrid_mpm.mass.trial import RATE_LIMIT, RATE_WINDOW, RefactorRate, kept_work
+from femgrid_mpm.mass.gauss_seidel import cg_work
+from femgrid_mpm.mass.trial import (ANALYSIS_WORK, RATE_LIMIT, RATE_WINDOW, TRY_ITERATIONS, FactoredRate,
+                                    RefactorRate, kept_work)
 from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
 from helpers import advanced_benchmark_block, benchmark_block
@@ -290,3 +292,41 @@ def test_kept_factors_that_go_stale_after_a_lost_trial_are_tried_again():
         simulation.advance()
     assert choices.trial.stale and choices.trial.start is not None and choices.trial.verdict is not None
 
+
+
+def test_factored_rate_counts_the_analyses_of_new_layouts():
+    """Two products a step of factorization and solves, and layouts analysed at steps 0, 25 and
+    30 (the first left out: any solver's first step makes its own): 2 products a step after the
+    first window, ``(40 * 2 + 2 * 140) / 40 = 9`` after the second, the average of the run.  CG is
+    tried above its work at TRY_ITERATIONS a solve (two solves: ``3 * 2 + 1.5 * 9 = 19.5``)."""
+    rate = FactoredRate()
+    for step in range(2 * RATE_WINDOW):
+        rate.observe(step in (0, 25, 30), 2.0)
+        if step == RATE_WINDOW - 1:
+            assert rate.per_step == 2.0
+    assert ANALYSIS_WORK == 140 and rate.per_step == 9.0
+    assert cg_work(2, 2 * TRY_ITERATIONS) == 19.5 and not rate.pays_to_try(2)
+    rate.per_step = 19.6
+    assert rate.pays_to_try(2)
+    assert FactoredRate.restored(rate.values()) == rate and FactoredRate.restored(None) == FactoredRate()
+
+
+def test_systems_factored_every_step_whose_layouts_keep_changing_give_way_to_cg(monkeypatch):
+    """GIMP's block at 1e3 points with ``dt = "auto"``: its small system is factored every step
+    (its kept factors went stale), but the points make a new layout at 4 of the steps 21-80, each
+    analysed afresh (140 products): 23.7 products a step against CG's 19.5 at 4.5 iterations a
+    solve, so CG is tried at step 81 and, at 20.9 products a step, stays (the run's wall time
+    389-448 -> 274-336 ms); within 1e-4 of the largest velocity of the direct solver's.  q1's
+    block analyses once: 7.6 products a step, factored every step to the end."""
+    monkeypatch.setattr(ldl, "EVERY_STEP_NODES", 1500)  # the fixture's 0 would leave no small system
+    scene = benchmark_block("gimp", "consistent", 1000).with_overrides(**{"time.dt": "auto"})
+    mass = against_direct(scene, windows=6).mass
+    choices = mass._choices
+    assert choices.factored.analyses >= 4 and choices.factored.pays_to_try(2)
+    assert choices.trial.factored and choices.trial.verdict is True and not mass._direct
+    assert all(system.ldl is None and system.factors is None for system in mass._systems)
+    q1 = Simulation(benchmark_block("q1", "consistent", 1000).with_overrides(**{"time.dt": "auto"}))
+    for _ in range(6 * RATE_WINDOW + 5):
+        q1.advance()
+    assert q1.mass._choices.factored.per_step < 10 and q1.mass._choices.trial.start is None
+    assert q1.mass._direct and q1.mass._systems[0].ldl is not None

@@ -21,7 +21,7 @@ from .ldl import small_layouts
 from .reused import KeptFactors
 from .sparse import _CompiledCSR
 from .system import _System
-from .trial import CgTrial, RefactorRate
+from .trial import CgTrial, FactoredRate, RefactorRate, factored_work
 
 #: largest number of active nodes for which "auto" factors the matrix
 DIRECT_LIMIT = 5000
@@ -77,11 +77,14 @@ class RunChoices:
     (``tensor_cg``, decided at the run's first SuperLU factorization: :data:`FILL_LIMIT`; the fill
     moves with the points, so it is not measured again), how often the kept factors were made
     again (:class:`.trial.RefactorRate`; too often: cheap small systems are factored every step,
-    the others solved by CG, see :func:`make_systems`) and whether that CG pays (:class:`CgTrial`)."""
+    the others solved by CG, see :func:`make_systems`), what the systems factored every step cost
+    with their layouts' analyses (:class:`.trial.FactoredRate`) and whether CG instead of either
+    pays (:class:`CgTrial`)."""
 
     tensor_cg: bool | None = None
     rate: RefactorRate = field(default_factory=RefactorRate)
     trial: CgTrial = field(default_factory=CgTrial)
+    factored: FactoredRate = field(default_factory=FactoredRate)
 
     def layout(self, active: np.ndarray, weak: np.ndarray, fixed, linear_solver: str) -> SystemsLayout:
         layout = SystemsLayout.of(active, weak, fixed, linear_solver)
@@ -94,7 +97,7 @@ class RunChoices:
         is "auto"; ``iterations``: the mass's CG iterations so far)."""
         stale = self.rate.stale
         solves = 2 * len(layout.groups)  # velocity and acceleration
-        self.trial.observe(iterations, solves, self.rate.per_step)
+        self.trial.observe(iterations, solves, self.factored.per_step if self.trial.factored else self.rate.per_step)
         if layout.stale_cg and self.trial.verdict is False:  # CG took more than the kept factors did
             layout.direct, layout.stale_cg = True, False
             self.rate.restart()
@@ -105,13 +108,22 @@ class RunChoices:
         # would sweep (symmetric Gauss-Seidel: a third of Jacobi's iterations); the scipy path's
         # systems are new CSR matrices, sorted, every diagonal stored
         sweeps = not tensor_preconditioner and (sweeps_apply(matrix) or not isinstance(matrix, _CompiledCSR))
-        try_cg = (stale or (sweeps and self.rate.per_step is not None)) and self.trial.verdict is not False
+        # systems factored every step whose layouts the points keep changing (each analysed afresh)
+        instead_of_factored = (sweeps and self.trial.verdict is not False and self.factored.pays_to_try(solves)
+                               and (self.trial.start is None or self.trial.factored))
+        try_cg = ((stale or (sweeps and self.rate.per_step is not None)) and self.trial.verdict is not False
+                  or instead_of_factored)
+        analysed = dict(layout.small or {})
         systems, correction, kept = make_systems(matrix, diagonal_index, layout, kept, weak, keeps_factors,
-                                                 tensor_preconditioner and self.tensor_cg is None, stale, try_cg)
+                                                 tensor_preconditioner and self.tensor_cg is None, stale, try_cg,
+                                                 instead_of_factored)
         if layout.stale_cg:
-            self.trial.begin(iterations, sweeps, stale)
+            self.trial.begin(iterations, sweeps, stale, instead_of_factored)
         if layout.fill is not None and self.tensor_cg is None:
             self.tensor_cg = not layout.direct
+        if keeps_factors and layout.direct and layout.small and set(layout.groups) <= layout.every_step(stale):
+            self.factored.observe(any(layout.small[columns] is not analysed.get(columns) for columns in layout.small),
+                                  sum(factored_work(symbolic, 2) for symbolic in layout.small.values()))
         on_kept = keeps_factors and layout.direct and not stale
         every_step = layout.every_step()
         on_kept_factors = [system for system in systems if tuple(system.columns) not in every_step]
@@ -126,17 +138,19 @@ class RunChoices:
         return systems, correction, kept
 
     def values(self) -> dict:
-        return {"refactor_rate": self.rate.values(), "tensor_cg": self.tensor_cg, "cg_trial": self.trial.values()}
+        return {"refactor_rate": self.rate.values(), "tensor_cg": self.tensor_cg, "cg_trial": self.trial.values(),
+                "factored_rate": self.factored.values()}
 
     @classmethod
     def restored(cls, values: dict) -> "RunChoices":
         return cls(values.get("tensor_cg"), RefactorRate.restored(values.get("refactor_rate")),
-                   CgTrial.restored(values.get("cg_trial")))
+                   CgTrial.restored(values.get("cg_trial")), FactoredRate.restored(values.get("factored_rate")))
 
 
 def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayout, kept: KeptFactors,
                  weak: np.ndarray, keeps_factors: bool, fill_test: bool = False,
-                 stale: bool = False, try_cg: bool = False) -> tuple[list, tuple | None, KeptFactors]:
+                 stale: bool = False, try_cg: bool = False,
+                 instead_of_factored: bool = False) -> tuple[list, tuple | None, KeptFactors]:
     """The step's systems of the assembled ``matrix``: ``(systems, correction, kept)``, the
     entries the exclusion overwrote if it was made into the one system in place, and the
     factors kept for the next steps (``kept``: those that fit the layout).
@@ -152,16 +166,17 @@ def make_systems(matrix, diagonal_index: np.ndarray | None, layout: SystemsLayou
     the small systems that factor cheaply are factored every step.  ``try_cg`` (stale, or CG
     would sweep, and :class:`CgTrial` has not found CG dearer): a layout with systems not
     factored every step (SuperLU's, or small ones that factor slowly) is solved by CG instead
-    (not direct).  GIMP's block, whose solves on
+    (not direct).  ``instead_of_factored`` (:meth:`.trial.FactoredRate.pays_to_try`): so are the
+    systems factored every step, and the layout is not analysed.  GIMP's block, whose solves on
     kept factors took more than :data:`.reused.REFACTOR_ITERATIONS` iterations at ~45% of the
     steps, at 2.5e3 and 5e3 points (small systems that factor slowly) 1.74 and 3.6 ms a step on
     kept factors, 1.41 and 2.5-2.9 on CG; at 1e4 (SuperLU's) 10.2-13.2 against 4.8-5.1."""
-    if keeps_factors and (layout.small is None or diagonal_index is None):
+    if keeps_factors and (layout.small is None or diagonal_index is None) and not instead_of_factored:
         # (the scipy path's structure is its product's, of this step)
         layout.small = small_layouts(matrix, layout.excluded, layout.groups, diagonal_index, layout.small)
     excluded, small = layout.excluded, layout.small or {}
     every_step = layout.every_step(stale)
-    if keeps_factors and try_cg and layout.direct and not set(layout.groups) <= every_step:
+    if keeps_factors and try_cg and layout.direct and (instead_of_factored or not set(layout.groups) <= every_step):
         # these systems cost too much to factor every step, and the kept factors went stale or
         # CG would sweep: CG, while it pays (CgTrial)
         layout.direct, layout.stale_cg = False, True

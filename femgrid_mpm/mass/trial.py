@@ -1,18 +1,23 @@
 """What "auto" measures of the kept factors and of CG during a run, to choose between them.
 
 :class:`RefactorRate` counts how often the kept factors (:mod:`.reused`) are made again and
-what their solves cost, :class:`CgTrial` what CG costs over its first steps instead of them
-(:mod:`.gauss_seidel`'s work model); :class:`.layout.RunChoices` keeps both to the run's end
-and in its checkpoints.  Both count the run's steps and iterations, not the machine's time, so
+what their solves cost, :class:`FactoredRate` what systems factored every step cost with the
+analyses of the layouts the points' motion makes, :class:`CgTrial` what CG costs over its first
+steps instead of either (:mod:`.gauss_seidel`'s work model); :class:`.layout.RunChoices` keeps
+them to the run's end and in its checkpoints.  Both count the run's steps and iterations, not the machine's time, so
 that a run and its resumption choose alike.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from .gauss_seidel import cg_work
 from .reused import REFACTOR_ITERATIONS
+
+if TYPE_CHECKING:
+    from .ldl import SymbolicLDL
 
 
 #: steps over which :class:`RefactorRate` counts the refactorizations of the kept factors ...
@@ -25,6 +30,19 @@ RATE_LIMIT = 0.4
 #: conversion took 33-59 times one solve of two columns with the factors it made (q1, q2,
 #: serendipity at 5e3 and 1e4 points, quadratic splines at 1e4; 2-6 ms)
 REFACTOR_SOLVES = 35
+
+#: a layout's analysis (:meth:`.ldl.SymbolicLDL.analyse`: SuperLU's ordering and the structure
+#: of ``L``) in products with the matrix: 120-150 for q1, q2, serendipity, gimp and the splines'
+#: blocks at 1e3 and 2.5e3 points (0.8-2.6 ms)
+ANALYSIS_WORK = 140
+#: the compiled ``L D L^T``'s factorization per ``sum c_j^2 / 2 nnz`` products, and a solve of
+#: two columns with it per ``(2 entries of L + n) / nnz`` products: measured 0.35-0.68 and
+#: 0.48-0.90 on the same systems
+FACTOR_SHARE = 0.5
+SOLVE_SHARE = 0.65
+#: CG's iterations a solve whose work :class:`FactoredRate`'s must exceed for CG to be tried
+#: (q1's block at 1e4 points took 3.5, its velocity 2 and its acceleration 5; gimp's at 1e3 4.2)
+TRY_ITERATIONS = 4.5
 
 
 @dataclass
@@ -96,6 +114,58 @@ def kept_work(solves: int, iterations: int, refactors: int, fill: float) -> floa
     return (solves + iterations) * (fill + 1.0) + refactors * REFACTOR_SOLVES * fill
 
 
+def factored_work(layout: "SymbolicLDL", solves: int) -> float:
+    """A step's work on a system factored every step, in products with its matrix: one
+    factorization and ``solves`` solves (:data:`FACTOR_SHARE`, :data:`SOLVE_SHARE`)."""
+    n = len(layout.order)
+    entries = 2 * len(layout.upper_rows) + n  # the free rows' stored entries (the strict upper half twice)
+    return (FACTOR_SHARE * layout.work * layout.factor_entries / (2 * entries)
+            + solves * SOLVE_SHARE * (2 * layout.factor_entries + n) / entries)
+
+
+@dataclass
+class FactoredRate:
+    """What systems factored every step (:mod:`.ldl`) cost a step, in products with the matrix:
+    their factorizations and solves (:func:`factored_work`) and the analyses of their layouts
+    (:data:`ANALYSIS_WORK` each, but for the first), averaged over all the run's steps on them
+    and updated every :data:`RATE_WINDOW` of those steps (``per_step``).  Where the points keep
+    changing the active or weak nodes, each new layout is analysed afresh, which CG does not
+    need: CG is tried (:class:`CgTrial`) once ``per_step`` exceeds CG's work at
+    :data:`TRY_ITERATIONS`.  The layouts come in bursts as the points cross the nodes' supports
+    back and forth, so the average is of the whole run, not of the last window.
+
+    GIMP's block at 1e3 points with ``dt = "auto"`` made 74 layouts in 455 steps (their analyses
+    took 218 of the run's 470 ms); CG solved the run in 259-273 ms against 389-448.  q1, q2 and
+    serendipity at 1e3 points analyse once and cost 6-8 products a step."""
+
+    steps: int = 0
+    analyses: int = 0
+    work: float = 0.0  # the factorizations' and solves' so far
+    per_step: float | None = None
+
+    def observe(self, analysed: bool, work: float) -> None:
+        """One step of systems factored every step: whether their layout was analysed in it,
+        and the work of its factorizations and solves."""
+        self.steps += 1
+        self.analyses += bool(analysed)
+        self.work += work
+        if self.steps % RATE_WINDOW == 0:
+            self.per_step = (self.work + ANALYSIS_WORK * max(self.analyses - 1, 0)) / self.steps
+
+    def pays_to_try(self, solves: int) -> bool:
+        """Whether CG at :data:`TRY_ITERATIONS` a solve would cost less than these systems do."""
+        return self.per_step is not None and self.per_step > cg_work(solves, TRY_ITERATIONS * solves)
+
+    def values(self) -> list:
+        return [self.steps, self.analyses, self.work, self.per_step]
+
+    @classmethod
+    def restored(cls, values: list | None) -> "FactoredRate":
+        if values is None:  # (an older checkpoint: counted from here)
+            return cls()
+        return cls(int(values[0]), int(values[1]), float(values[2]), _or_none(float, values[3]))
+
+
 @dataclass
 class CgTrial:
     """Whether CG, tried instead of the kept factors (:func:`.layout.make_systems`), is cheaper than
@@ -119,16 +189,17 @@ class CgTrial:
     verdict: bool | None = None  # True: CG for the rest of the run; False: kept factors
     sweeps: bool = True  # the CG tried is symmetric Gauss-Seidel's (else judged by :meth:`limit`)
     stale: bool = False  # begun because the kept factors went stale
+    factored: bool = False  # tried instead of systems factored every step (:class:`FactoredRate`)
 
     def limit(self) -> float:
         """CG's iterations a solve at which it costs what the kept factors did at their most."""
         return (REFACTOR_ITERATIONS + 1) * self.fill + REFACTOR_ITERATIONS
 
-    def begin(self, iterations: int, sweeps: bool, stale: bool) -> None:
-        """A step on CG instead of kept factors with the mass's CG iterations so far: the
-        trial's first, if not begun."""
+    def begin(self, iterations: int, sweeps: bool, stale: bool, factored: bool = False) -> None:
+        """A step on CG instead of kept factors (or, ``factored``, of systems factored every
+        step) with the mass's CG iterations so far: the trial's first, if not begun."""
         if self.start is None:
-            self.start, self.sweeps, self.stale = iterations, sweeps, stale
+            self.start, self.sweeps, self.stale, self.factored = iterations, sweeps, stale, factored
 
     def observe(self, iterations: int, solves_per_step: int, kept_per_step: float | None) -> None:
         """At a step's start, once begun: the mass's CG iterations so far."""
@@ -143,14 +214,16 @@ class CgTrial:
                 self.verdict = bool(not self.fill or taken <= self.limit() * RATE_WINDOW * solves_per_step)
 
     def values(self) -> list:
-        return [self.fill, self.start, self.steps, self.verdict, self.sweeps, self.stale]
+        return [self.fill, self.start, self.steps, self.verdict, self.sweeps, self.stale, self.factored]
 
     @classmethod
     def restored(cls, values: list | None) -> "CgTrial":
         if values is None:
             return cls()
         sweeps, stale = (bool(values[4]), bool(values[5])) if len(values) > 4 else (False, True)  # (older: stale, limit)
-        return cls(float(values[0]), _or_none(int, values[1]), int(values[2]), _or_none(bool, values[3]), sweeps, stale)
+        factored = bool(values[6]) if len(values) > 6 else False
+        return cls(float(values[0]), _or_none(int, values[1]), int(values[2]), _or_none(bool, values[3]), sweeps, stale,
+                   factored)
 
 
 def _or_none(cast, value):
