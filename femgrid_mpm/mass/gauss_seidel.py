@@ -124,9 +124,10 @@ def _gauss_seidel_cg(indptr, indices, data, upper_start, half, inverse, b, x0, r
         _sweep_down(indptr, indices, data, upper_start, inverse, s, s, s, s, False, np.zeros((3, k)))
     rr = np.zeros(k)  # r^ . r^
     size = np.zeros(k)  # max |x|
-    q = np.zeros_like(b)  # D^1/2 p^, s at the first sweep up (beta 0)
+    q = np.empty_like(b)  # D^1/2 p^, s at the first sweep up (beta 0)
     t = np.empty_like(b)  # C^-T p^, the direction of x
-    previous = np.zeros_like(b)  # the last direction t; beta 0 times this at the first sweep
+    previous = np.empty_like(b)  # the last direction t (not read at the first sweep: zeroing it, and q,
+    # took 4 memsets of 16 MB a solve for q2 at 1e6 points)
     u = np.empty_like(b)  # q - D t, then D^1/2 A^ p^
     alpha = np.zeros(k)
     beta = np.zeros(k)
@@ -275,8 +276,12 @@ def _sweep_up(indptr, indices, data, upper_start, inverse, q, s, alpha, beta, t,
             m1 = max(m1, abs(x1))
             r0 = fused(s0, s0 * inverse[i], r0)
             r1 = fused(s1, s1 * inverse[i], r1)
-            q0 = fused(beta[0], q[i, 0], s0)
-            q1 = fused(beta[1], q[i, 1], s1)
+            if step:
+                q0 = fused(beta[0], q[i, 0], s0)
+                q1 = fused(beta[1], q[i, 1], s1)
+            else:  # the first direction: the residual (+ 0.0: as beta 0 times a zero direction added)
+                q0 = s0 + 0.0
+                q1 = s1 + 0.0
             q[i, 0] = q0
             q[i, 1] = q1
             t0 = q0
@@ -295,8 +300,8 @@ def _sweep_up(indptr, indices, data, upper_start, inverse, q, s, alpha, beta, t,
             t[i, 1] = t1
             u[i, 0] = fused(-d, t0, q0)
             u[i, 1] = fused(-d, t1, q1)
-            e0 = max(e0, abs(fused(-beta[0], previous[i, 0], t0)))
-            e1 = max(e1, abs(fused(-beta[1], previous[i, 1], t1)))
+            e0 = max(e0, abs(fused(-beta[0], previous[i, 0], t0)) if step else abs(t0))
+            e1 = max(e1, abs(fused(-beta[1], previous[i, 1], t1)) if step else abs(t1))
         error[0], error[1], rr[0], rr[1], size[0], size[1] = e0, e1, r0, r1, m0, m1
         return
     error[:] = 0.0
@@ -312,7 +317,7 @@ def _sweep_up(indptr, indices, data, upper_start, inverse, q, s, alpha, beta, t,
                 s[i, c] *= d
             size[c] = max(size[c], abs(x[i, c]))
             rr[c] = fused(s[i, c], s[i, c] * inverse[i], rr[c])
-            q[i, c] = fused(beta[c], q[i, c], s[i, c])
+            q[i, c] = fused(beta[c], q[i, c], s[i, c]) if step else s[i, c] + 0.0
             t[i, c] = q[i, c]
         entry = np.uint64(indptr[i + 1])
         while entry > np.uint64(upper_start[i]) + one:
@@ -323,5 +328,5 @@ def _sweep_up(indptr, indices, data, upper_start, inverse, q, s, alpha, beta, t,
         for c in range(k):
             t[i, c] *= inverse[i]
             u[i, c] = fused(-d, t[i, c], q[i, c])
-            error[c] = max(error[c], abs(fused(-beta[c], previous[i, c], t[i, c])))
+            error[c] = max(error[c], abs(fused(-beta[c], previous[i, c], t[i, c])) if step else abs(t[i, c]))
 
