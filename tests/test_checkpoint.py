@@ -359,3 +359,26 @@ def test_a_checkpoint_without_the_cg_trial_measures_the_fill_from_its_kept_facto
     assert reference.mass._choices.trial.verdict is True
     assert resumed.mass._choices.trial.verdict is True and resumed.mass._choices.trial.fill > 1
     assert not resumed.mass._direct
+
+
+def test_a_resumed_run_counts_the_analyses_of_the_uninterrupted_one():
+    """q1's block at 1e3 points with ``dt = "auto"``, factored every step on one layout: resumed
+    at steps 5 and 10 (each resumption makes its layout afresh), it counts no analysis the
+    uninterrupted run did not (the layouts are compared by their nodes, not as objects), keeps
+    its solver, and is bit for bit the uninterrupted run at step 45.  Counted per object, the two
+    resumptions made 23.9 products a step of 7.6, above CG's 19.5: CG was tried at step 21."""
+    scene = benchmark_block("q1", "consistent", 1000).with_overrides(**{"time.dt": "auto"})
+    reference, resumed = Simulation(scene), Simulation(scene)
+    for stop in (5, 10):
+        while resumed.step_index < stop:
+            resumed.advance()
+        arrays, values = resumed.state()
+        resumed = Simulation(scene)
+        resumed.restore(arrays, values)
+    for simulation in (reference, resumed):
+        while simulation.step_index < 45:
+            simulation.advance()
+    assert resumed.mass._choices.factored == reference.mass._choices.factored
+    assert reference.mass._choices.factored.analyses == 0 and reference.mass._choices.trial.start is None
+    assert np.array_equal(resumed.particles.v, reference.particles.v)
+    assert np.array_equal(resumed.particles.x, reference.particles.x)

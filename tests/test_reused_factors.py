@@ -295,26 +295,32 @@ def test_kept_factors_that_go_stale_after_a_lost_trial_are_tried_again():
 
 
 def test_factored_rate_counts_the_analyses_of_new_layouts():
-    """Two products a step of factorization and solves, and layouts analysed at steps 0, 25 and
-    30 (the first left out: any solver's first step makes its own): 2 products a step after the
-    first window, ``(40 * 2 + 2 * 140) / 40 = 9`` after the second, the average of the run.  CG is
-    tried above its work at TRY_ITERATIONS a solve (two solves: ``3 * 2 + 1.5 * 9 = 19.5``)."""
-    rate = FactoredRate()
+    """Two products a step of factorization and solves on one layout for 25 steps, another for 5,
+    a third for 10: its first layout is not counted (any solver's first step makes one), the two
+    after it are, 140 products a system: 2 products a step after the first window, ``(40 * 2 + 2 *
+    140) / 40 = 9`` after the second (the run's average), twice the analyses with two systems.  CG
+    is tried above its work at TRY_ITERATIONS a solve (two solves: ``3 * 2 + 1.5 * 9 = 19.5``), and
+    only if the last step was factored every step."""
+    rate, two = FactoredRate(), FactoredRate()
     for step in range(2 * RATE_WINDOW):
-        rate.observe(step in (0, 25, 30), 2.0)
+        layout = "first" if step < 25 else "second" if step < 30 else "third"
+        rate.observe(layout, 1, 2.0)
+        two.observe(layout, 2, 4.0)
         if step == RATE_WINDOW - 1:
             assert rate.per_step == 2.0
-    assert ANALYSIS_WORK == 140 and rate.per_step == 9.0
+    assert ANALYSIS_WORK == 140 and rate.per_step == 9.0 and two.analyses == 4 and two.per_step == 18.0
     assert cg_work(2, 2 * TRY_ITERATIONS) == 19.5 and not rate.pays_to_try(2)
     rate.per_step = 19.6
     assert rate.pays_to_try(2)
+    rate.last = False
+    assert not rate.pays_to_try(2)
     assert FactoredRate.restored(rate.values()) == rate and FactoredRate.restored(None) == FactoredRate()
 
 
 def test_systems_factored_every_step_whose_layouts_keep_changing_give_way_to_cg(monkeypatch):
     """GIMP's block at 1e3 points with ``dt = "auto"``: its small system is factored every step
     (its kept factors went stale), but the points make a new layout at 4 of the steps 21-80, each
-    analysed afresh (140 products): 23.7 products a step against CG's 19.5 at 4.5 iterations a
+    analysed afresh (140 products): 26.0 products a step against CG's 19.5 at 4.5 iterations a
     solve, so CG is tried at step 81 and, at 20.9 products a step, stays (the run's wall time
     389-448 -> 274-336 ms); within 1e-4 of the largest velocity of the direct solver's.  q1's
     block analyses once: 7.6 products a step, factored every step to the end."""

@@ -11,6 +11,7 @@ singularity near the edges, :mod:`.singular`).
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -53,6 +54,7 @@ class SystemsLayout:
     fill: float | None = None  # SuperLU's fill, where make_systems measured it (:func:`_fill`)
     stale_cg: bool = False  # solved by CG instead of kept factors (make_systems, CgTrial)
     edges: dict = field(default_factory=dict)  # {columns: SymbolicLDL or None} (.singular)
+    _key: str | None = field(default=None, compare=False, repr=False)  # (key(), made once)
 
     @classmethod
     def of(cls, active: np.ndarray, weak: np.ndarray, fixed: np.ndarray | None, linear_solver: str) -> "SystemsLayout":
@@ -61,6 +63,13 @@ class SystemsLayout:
         groups = [(0, 1)] if np.array_equal(excluded[:, 0], excluded[:, 1]) else [(0,), (1,)]
         direct = linear_solver == "direct" or (linear_solver == "auto" and np.count_nonzero(active) <= DIRECT_LIMIT)
         return cls(active.copy(), weak.copy(), excluded, groups, direct)
+
+    def key(self) -> str:
+        """A digest of the excluded and weak nodes, the same for the same layout in a resumed run."""
+        if self._key is None:
+            nodes = np.packbits(self.excluded).tobytes() + np.packbits(self.weak).tobytes()
+            self._key = hashlib.blake2b(nodes, digest_size=8).hexdigest()
+        return self._key
 
     def every_step(self, stale: bool = False) -> set:
         """The columns of the systems factored every step (:attr:`.ldl.SymbolicLDL.every_step`; with
@@ -113,7 +122,6 @@ class RunChoices:
                                and (self.trial.start is None or self.trial.factored))
         try_cg = ((stale or (sweeps and self.rate.per_step is not None)) and self.trial.verdict is not False
                   or instead_of_factored)
-        analysed = dict(layout.small or {})
         systems, correction, kept = make_systems(matrix, diagonal_index, layout, kept, weak, keeps_factors,
                                                  tensor_preconditioner and self.tensor_cg is None, stale, try_cg,
                                                  instead_of_factored)
@@ -121,9 +129,12 @@ class RunChoices:
             self.trial.begin(iterations, sweeps, stale, instead_of_factored)
         if layout.fill is not None and self.tensor_cg is None:
             self.tensor_cg = not layout.direct
-        if keeps_factors and layout.direct and layout.small and set(layout.groups) <= layout.every_step(stale):
-            self.factored.observe(any(layout.small[columns] is not analysed.get(columns) for columns in layout.small),
-                                  sum(factored_work(symbolic, 2) for symbolic in layout.small.values()))
+        if keeps_factors and layout.direct:
+            if layout.small and set(layout.groups) <= layout.every_step(stale):
+                self.factored.observe(layout.key(), len(layout.small),
+                                      sum(factored_work(symbolic, 2) for symbolic in layout.small.values()))
+            else:  # on kept factors: a trial from here is theirs
+                self.factored.last = False
         on_kept = keeps_factors and layout.direct and not stale
         every_step = layout.every_step()
         on_kept_factors = [system for system in systems if tuple(system.columns) not in every_step]

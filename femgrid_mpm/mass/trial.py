@@ -127,12 +127,13 @@ def factored_work(layout: "SymbolicLDL", solves: int) -> float:
 class FactoredRate:
     """What systems factored every step (:mod:`.ldl`) cost a step, in products with the matrix:
     their factorizations and solves (:func:`factored_work`) and the analyses of their layouts
-    (:data:`ANALYSIS_WORK` each, but for the first), averaged over all the run's steps on them
+    (:data:`ANALYSIS_WORK` a system, but for the first layout), averaged over all the run's steps on them
     and updated every :data:`RATE_WINDOW` of those steps (``per_step``).  Where the points keep
     changing the active or weak nodes, each new layout is analysed afresh, which CG does not
     need: CG is tried (:class:`CgTrial`) once ``per_step`` exceeds CG's work at
-    :data:`TRY_ITERATIONS`.  The layouts come in bursts as the points cross the nodes' supports
-    back and forth, so the average is of the whole run, not of the last window.
+    :data:`TRY_ITERATIONS`, if the last step was factored every step.  The layouts come in bursts
+    as the points cross the nodes' supports back and forth, so the average is of the whole run,
+    not of the last window.
 
     GIMP's block at 1e3 points with ``dt = "auto"`` made 74 layouts in 455 steps (their analyses
     took 218 of the run's 470 ms); CG solved the run in 259-273 ms against 389-448.  q1, q2 and
@@ -142,28 +143,36 @@ class FactoredRate:
     analyses: int = 0
     work: float = 0.0  # the factorizations' and solves' so far
     per_step: float | None = None
+    layout: str | None = None  # the last layout observed (:meth:`.layout.SystemsLayout.key`)
+    last: bool = False  # whether the last step solved directly was factored every step
 
-    def observe(self, analysed: bool, work: float) -> None:
-        """One step of systems factored every step: whether their layout was analysed in it,
-        and the work of its factorizations and solves."""
+    def observe(self, layout: str, systems: int, work: float) -> None:
+        """One step of ``systems`` systems factored every step on ``layout`` (its key), with the
+        work of its factorizations and solves; a layout other than the last observed one was
+        analysed in it (the first observed is not counted: any solver's first step needs it).
+        The key, not the layout object, is compared: a resumed run makes its layout afresh."""
+        if self.layout is not None and layout != self.layout:
+            self.analyses += systems
+        self.layout, self.last = layout, True
         self.steps += 1
-        self.analyses += bool(analysed)
         self.work += work
         if self.steps % RATE_WINDOW == 0:
-            self.per_step = (self.work + ANALYSIS_WORK * max(self.analyses - 1, 0)) / self.steps
+            self.per_step = (self.work + ANALYSIS_WORK * self.analyses) / self.steps
 
     def pays_to_try(self, solves: int) -> bool:
-        """Whether CG at :data:`TRY_ITERATIONS` a solve would cost less than these systems do."""
-        return self.per_step is not None and self.per_step > cg_work(solves, TRY_ITERATIONS * solves)
+        """Whether the last step was factored every step and CG at :data:`TRY_ITERATIONS` a solve
+        would cost less than these systems do."""
+        return self.last and self.per_step is not None and self.per_step > cg_work(solves, TRY_ITERATIONS * solves)
 
     def values(self) -> list:
-        return [self.steps, self.analyses, self.work, self.per_step]
+        return [self.steps, self.analyses, self.work, self.per_step, self.layout, self.last]
 
     @classmethod
     def restored(cls, values: list | None) -> "FactoredRate":
         if values is None:  # (an older checkpoint: counted from here)
             return cls()
-        return cls(int(values[0]), int(values[1]), float(values[2]), _or_none(float, values[3]))
+        return cls(int(values[0]), int(values[1]), float(values[2]), _or_none(float, values[3]),
+                   _or_none(str, values[4]), bool(values[5]))
 
 
 @dataclass
