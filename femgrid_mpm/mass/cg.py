@@ -227,16 +227,27 @@ def _product_and_curvature(A, p):
 GUESS_LUMPED, GUESS_LAST, GUESS_EXTRAPOLATED, GUESS_ADVANCED = range(4)
 
 
-@compiled(inline="always")
-def _guess_two(mode, rhs, lumped, tiny, inverse_diagonal, first, second, dt, shift, columns, excluded, guess):
-    """:func:`_guess` for two columns, the same values: the array elements numba would load
-    again after every store (the store might alias them) are locals."""
-    j0, j1 = columns[0], columns[1]
-    h0, h1 = shift[0], shift[1]
-    for i in range(rhs.shape[0]):
+@compiled()
+def _guess(mode, rhs, lumped, tiny, inverse_diagonal, first, second, dt, shift, columns, excluded):
+    """CG's first guess on the system's columns, one or two (one pass; numpy's where-chains
+    took ~0.5 ms a solve at 27,000 nodes).  ``first``/``second``: the last and the older
+    solution (extrapolated), the last velocity and acceleration (advanced), as (n_nodes, 2)
+    arrays of all columns.  A node takes the history's value where the history knows it
+    (nonzero), the lumped solution ``rhs / m_i`` elsewhere, zero where excluded.  The
+    columns and the shift are locals (one column: taken twice), as numba would load array
+    elements again after every store of the guess: 3.5x faster at 1e6 points than a loop
+    over the columns, and one loop to compile."""
+    n, k = rhs.shape
+    if k > 2:
+        raise ValueError("a system solves one or two velocity components")
+    guess = np.empty((n, k))
+    j0, j1 = columns[0], columns[k - 1]
+    h0, h1 = shift[0], shift[k - 1]
+    last = k - 1
+    for i in range(n):
         if excluded[i]:
             guess[i, 0] = 0.0
-            guess[i, 1] = 0.0
+            guess[i, last] = 0.0
             continue
         f0, f1 = (first[i, j0], first[i, j1]) if mode != GUESS_LUMPED else (0.0, 0.0)
         if mode == GUESS_ADVANCED:
@@ -252,49 +263,9 @@ def _guess_two(mode, rhs, lumped, tiny, inverse_diagonal, first, second, dt, shi
             g0, g1 = f0, f1
         if not known:
             scale = lumped[i] if abs(lumped[i]) > tiny else 1.0 / inverse_diagonal[i]
-            g0, g1 = rhs[i, 0] / scale, rhs[i, 1] / scale
+            g0, g1 = rhs[i, 0] / scale, rhs[i, last] / scale
         guess[i, 0] = g0
-        guess[i, 1] = g1
-
-
-@compiled()
-def _guess(mode, rhs, lumped, tiny, inverse_diagonal, first, second, dt, shift, columns, excluded):
-    """CG's first guess on the system's columns (one pass; numpy's where-chains took ~0.5 ms
-    a solve at 27,000 nodes).  ``first``/``second``: the last and the older solution
-    (extrapolated), the last velocity and acceleration (advanced), as (n_nodes, 2) arrays
-    of all columns.  A node takes the history's value where the history knows it
-    (nonzero), the lumped solution ``rhs / m_i`` elsewhere, zero where excluded."""
-    n, k = rhs.shape
-    guess = np.empty((n, k))
-    if k == 2:  # both components: 3.5x faster at 1e6 points (the columns and shift in locals)
-        _guess_two(mode, rhs, lumped, tiny, inverse_diagonal, first, second, dt, shift, columns, excluded, guess)
-        return guess
-    for i in range(n):
-        if excluded[i]:
-            for c in range(k):
-                guess[i, c] = 0.0
-            continue
-        scale = lumped[i] if abs(lumped[i]) > tiny else 1.0 / inverse_diagonal[i]
-        known = False
-        if mode == GUESS_ADVANCED:
-            for c in range(k):
-                known = known or first[i, columns[c]] != 0.0 or second[i, columns[c]] != 0.0
-        elif mode == GUESS_EXTRAPOLATED:
-            for c in range(k):
-                known = known or (second[i, columns[c]] != 0.0 and first[i, columns[c]] != 0.0)
-        elif mode == GUESS_LAST:
-            for c in range(k):
-                known = known or first[i, columns[c]] != 0.0
-        for c in range(k):
-            j = columns[c]
-            if not known:
-                guess[i, c] = rhs[i, c] / scale
-            elif mode == GUESS_ADVANCED:
-                guess[i, c] = first[i, j] + dt * second[i, j] + shift[c]
-            elif mode == GUESS_EXTRAPOLATED:
-                guess[i, c] = 2.0 * first[i, j] - second[i, j]
-            else:
-                guess[i, c] = first[i, j]
+        guess[i, last] = g1
     return guess
 
 

@@ -37,20 +37,21 @@ def plus_row(values, row):
 
 @compiled()
 def free_part(values, columns, excluded):
-    """``values[:, columns]`` with the excluded rows zero, and whether any entry is nonzero."""
+    """``values[:, columns]`` (one or two columns) with the excluded rows zero, and whether any
+    entry is nonzero.  The columns are locals (one column: taken twice): numba would load them
+    again after every store of ``out``."""
     n, k = values.shape[0], len(columns)
     out = np.empty((n, k))
     nonzero = False
-    if k == 2:  # the columns in locals (numba loads them again after every store of out)
-        j0, j1 = columns[0], columns[1]
-        for i in range(n):
-            keep = not excluded[i]
-            first = values[i, j0] if keep else 0.0
-            second = values[i, j1] if keep else 0.0
-            out[i, 0] = first
-            out[i, 1] = second
-            nonzero |= (first != 0.0) | (second != 0.0)
-        return out, nonzero
+    j0, j1, last = columns[0], columns[k - 1], k - 1
+    for i in range(n):
+        keep = not excluded[i]
+        first = values[i, j0] if keep else 0.0
+        second = values[i, j1] if keep else 0.0
+        out[i, 0] = first
+        out[i, last] = second
+        nonzero |= (first != 0.0) | (second != 0.0)
+    return out, nonzero
     for i in range(n):
         for c in range(k):
             out[i, c] = 0.0 if excluded[i] else values[i, columns[c]]
