@@ -10,7 +10,7 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from femgrid_mpm.mass import layout, ldl
+from femgrid_mpm.mass import layout, ldl, trial
 from femgrid_mpm.mass.direct import _factor
 from femgrid_mpm.mass.reused import REFACTOR_ITERATIONS, ReusedFactors
 from femgrid_mpm.mass.gauss_seidel import cg_work
@@ -336,3 +336,17 @@ def test_systems_factored_every_step_whose_layouts_keep_changing_give_way_to_cg(
         q1.advance()
     assert q1.mass._choices.factored.per_step < 10 and q1.mass._choices.trial.start is None
     assert q1.mass._direct and q1.mass._systems[0].ldl is not None
+
+
+def test_a_lost_trial_against_systems_factored_every_step_goes_back_to_them(monkeypatch):
+    """q1's block at 1e3 points factored every step (7.6 products a step), tried on CG with the
+    threshold set to no iteration at all (6 products): CG's 20 steps cost more (about 20 a
+    step), and the run goes back to factoring every step for good, its layout analysed again,
+    within 1e-4 of the largest velocity of the direct solver's."""
+    monkeypatch.setattr(ldl, "EVERY_STEP_NODES", 1500)  # the fixture's 0 would leave no small system
+    monkeypatch.setattr(trial, "TRY_ITERATIONS", 0.0)
+    scene = benchmark_block("q1", "consistent", 1000).with_overrides(**{"time.dt": "auto"})
+    mass = against_direct(scene, windows=3).mass
+    choices = mass._choices
+    assert choices.trial.factored and choices.trial.steps == RATE_WINDOW and choices.trial.verdict is False
+    assert mass._direct and mass._layout.small and mass._systems[0].ldl is not None
