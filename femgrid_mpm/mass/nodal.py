@@ -52,8 +52,3 @@ def free_part(values, columns, excluded):
         out[i, last] = second
         nonzero |= (first != 0.0) | (second != 0.0)
     return out, nonzero
-    for i in range(n):
-        for c in range(k):
-            out[i, c] = 0.0 if excluded[i] else values[i, columns[c]]
-            nonzero = nonzero or out[i, c] != 0.0
-    return out, nonzero

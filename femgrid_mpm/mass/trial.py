@@ -4,8 +4,8 @@
 what their solves cost, :class:`FactoredRate` what systems factored every step cost with the
 analyses of the layouts the points' motion makes, :class:`CgTrial` what CG costs over its first
 steps instead of either (:mod:`.gauss_seidel`'s work model); :class:`.layout.RunChoices` keeps
-them to the run's end and in its checkpoints.  Both count the run's steps and iterations, not the machine's time, so
-that a run and its resumption choose alike.
+them to the run's end and in its checkpoints.  All three count the run's steps and iterations,
+not the machine's time, so that a run and its resumption choose alike.
 """
 
 from __future__ import annotations
