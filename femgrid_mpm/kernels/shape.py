@@ -67,7 +67,7 @@ def factors_1d(s, c, scale):  # pragma: no cover - replaced by the overload in n
 @overload(factors_1d, inline="always")
 def _factors_1d(s, c, scale):
     # Horner's scheme, each step one fused multiply-add (:mod:`.arithmetic`)
-    n1 = len(c.types) if hasattr(c, "types") else c.count
+    n1 = len(c)  # the numba tuple type: its number of elements
     if n1 == 2:
         def linear(s, c, scale):
             return ((fused(c[0][1], s, c[0][0]), fused(c[1][1], s, c[1][0])),

@@ -12,6 +12,8 @@ import math
 import re
 from typing import Annotated, Union
 
+import numpy as np
+
 from ..effects import entries, kinds, tables
 
 
@@ -193,7 +195,7 @@ def _shown(value, depth: int = 0) -> str:
         return json.dumps(value)
     if isinstance(value, float) and not math.isfinite(value):
         return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
-    if hasattr(value, "tolist") and hasattr(value, "dtype"):  # numpy arrays and scalars as Python values
+    if isinstance(value, (np.ndarray, np.generic)):  # numpy arrays and scalars as Python values
         return _shown(value.tolist(), depth)
     if isinstance(value, (list, tuple)):
         shown = [_shown(item, depth + 1) for item in value[:SHOWN_ITEMS]]
