@@ -59,7 +59,9 @@ class SystemsLayout:
     @classmethod
     def of(cls, active: np.ndarray, weak: np.ndarray, fixed: np.ndarray | None, linear_solver: str) -> "SystemsLayout":
         excluded = ~active[:, None] if fixed is None else (~active[:, None] | fixed)
-        excluded = np.broadcast_to(excluded, (len(active), 2))
+        # column by column in memory: each system's column is then a contiguous array, so the
+        # kernels it reaches compile once (a strided column was a second specialisation of each)
+        excluded = np.broadcast_to(np.asfortranarray(excluded), (len(active), 2))
         groups = [(0, 1)] if np.array_equal(excluded[:, 0], excluded[:, 1]) else [(0,), (1,)]
         direct = linear_solver == "direct" or (linear_solver == "auto" and np.count_nonzero(active) <= DIRECT_LIMIT)
         return cls(active.copy(), weak.copy(), excluded, groups, direct)
