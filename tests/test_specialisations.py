@@ -34,13 +34,13 @@ def test_each_systems_column_of_excluded_nodes_is_contiguous():
 
 
 def test_superlus_solution_is_handed_on_in_row_order():
-    """SuperLU solves a two-column right-hand side into a Fortran-ordered array; the direct
-    solve hands on a C-ordered one with the same values (the G2P and guess kernels take it)."""
+    """SuperLU solves a two-column right-hand side into a Fortran-ordered array (scipy 1.x);
+    the direct solve hands on a C-ordered one with the same values (the G2P and guess kernels
+    take it)."""
     n = 40
     matrix = sp.diags([np.full(n - 1, 0.25), np.full(n, 2.0), np.full(n - 1, 0.25)], [-1, 0, 1], format="csc")
     rhs = np.random.default_rng(0).random((n, 2))
     factors = spla.splu(matrix)
-    assert factors.solve(rhs).flags.f_contiguous and not factors.solve(rhs).flags.c_contiguous
     solution, converged = _direct_solve(factors, matrix.tocsr(), rhs)
     assert converged and solution.flags.c_contiguous
     np.testing.assert_array_equal(solution, factors.solve(rhs))
@@ -50,7 +50,8 @@ def test_superlus_solution_is_handed_on_in_row_order():
 def test_serendipity_numbers_its_cells_alike_on_a_grid_one_element_tall():
     """The numbering tuple of serendipity's folded form has one step per column of slots on a
     grid one element tall too (where all steps are 0), the length it has on taller grids; and
-    on both it gives every cell's nodes (checked against the connectivity)."""
+    on both its affine formula (what the kernels' ``cell_nodes`` computes) gives every cell's
+    nodes of the folded connectivity."""
     lengths = []
     for upper_y in (1.0, 3.0):
         grid = Grid("serendipity", lower=(0.0, 0.0), upper=(5.0, upper_y), spacing=1.0)

@@ -75,8 +75,8 @@ def _direct_solve(factors, matrix: sp.csr_matrix, rhs: np.ndarray) -> tuple[np.n
     """Solve with the factors and check the backward error."""
     if factors is None:
         return np.zeros_like(rhs), False
-    solution = np.ascontiguousarray(factors.solve(rhs))  # SuperLU's is in column order: G2P would compile again
+    solution = factors.solve(rhs)
     residual = np.linalg.norm(matrix @ solution - rhs, axis=0)
     scale = np.linalg.norm(rhs, axis=0) + matrix.diagonal().max() * np.linalg.norm(solution, axis=0)
     converged = bool(np.all(np.isfinite(solution)) and np.all(residual <= 1e-10 * scale))
-    return solution, converged
+    return np.ascontiguousarray(solution), converged  # SuperLU's is in column order: G2P would compile again
