@@ -25,7 +25,8 @@ load on a shared machine disturbs least).  The workloads:
 ``numba:compile`` events, :mod:`numba.core.event`) with its CPU seconds: each
 kernel with the arguments' types it was specialised for, and indented below
 it the helpers and numba's own overloads compiled for it (a helper inlined
-with ``inline="always"`` has no line of its own).
+with ``inline="always"`` has no line of its own), and then the kernels compiled again for
+types that differ only in memory order or writability (:func:`recompiled`).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -155,6 +157,18 @@ def measure(workload: str) -> dict:
     return {"cold": cold, "warm": warm}
 
 
+def recompiled(compilations) -> list[str]:
+    """The kernels (top-level compilations) compiled more than once for argument types that
+    differ only in an array's memory order ('C', 'F', 'A') or read-only flag: a second
+    compilation that one layout at the caller would save."""
+    seen: dict = {}
+    for name, types, _, level in compilations:
+        if level == 0:
+            plain = re.sub(r"'[CFA]'", "'C'", types).replace("True, aligned", "False, aligned")
+            seen.setdefault((name, plain), []).append(types)
+    return sorted({f"{name} ({len(variants)}x)" for (name, _), variants in seen.items() if len(variants) > 1})
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", action="append", choices=WORKLOADS, help="this workload (repeatable; default: all)")
@@ -177,6 +191,10 @@ def main(argv=None) -> None:
             for name, types, seconds, level in result["cold"]["compilations"]:
                 if seconds > SHOWN:
                     print(f"  {seconds:6.2f}  {'  ' * level}{name}  {types[:120] if level == 0 else ''}")
+        for workload, result in results.items():
+            again = recompiled(result["cold"]["compilations"])
+            print(f"\n{workload}: kernels compiled again for types that differ only in memory order or "
+                  f"writability: {', '.join(again) if again else 'none'}")
     if args.json:
         with open(args.json, "w") as handle:
             json.dump(results, handle, indent=1)

@@ -67,3 +67,29 @@ def test_serendipity_numbers_its_cells_alike_on_a_grid_one_element_tall():
                 row = connectivity[ix * n_y + iy]
                 assert [nodes[s] for s in range(9) if s != 4] == [int(row[s]) for s in range(9) if s != 4]
     assert lengths == [13, 13]
+
+
+def test_the_compile_benchmark_names_kernels_compiled_again_for_another_layout():
+    """``benchmarks/compile_time.py --kernels`` lists the kernels compiled more than once for
+    types that differ only in memory order or writability (helpers, level 1, are not counted;
+    another tuple length is another form)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from compile_time import recompiled
+
+    c = "Array(float64, 2, 'C', False, aligned=True)"
+    f = "Array(float64, 2, 'F', False, aligned=True)"
+    readonly = "Array(bool, 1, 'C', True, aligned=True)"
+    writable = "Array(bool, 1, 'C', False, aligned=True)"
+    compilations = [
+        ("g2p", f"({c}, UniTuple(int64, 3))", 1.0, 0),
+        ("g2p", f"({f}, UniTuple(int64, 3))", 1.0, 0),  # again: Fortran order
+        ("g2p", f"({c}, UniTuple(int64, 4))", 1.0, 0),  # another form
+        ("free_part", f"({readonly},)", 0.1, 0),
+        ("free_part", f"({writable},)", 0.1, 0),  # again: writable
+        ("helper", f"({c},)", 0.1, 1),
+        ("helper", f"({f},)", 0.1, 1),  # a helper's: not a kernel of its own
+    ]
+    assert recompiled(compilations) == ["free_part (2x)", "g2p (2x)"]
