@@ -98,11 +98,13 @@ def test_serendipity_lumped_has_a_finite_step_despite_negative_masses():
 
 
 def test_large_problems_solve_with_the_mass_component_by_component(monkeypatch):
-    """Above LARGE_PROBLEM degrees of freedom ARPACK's solves with ``kron(M, I2)`` go through
+    """Above DENSE_LIMIT degrees of freedom ARPACK's solves with ``kron(M, I2)`` go through
     each component's factors of the nodal M (:class:`_ComponentSolve`): with x fixed on the
     block's left part only, so that the components' free nodes differ, it inverts the reduced mass
-    to 1e-10, and the critical step is the one of scipy's own factorization within ARPACK's tolerance."""
+    to 1e-10, and the critical step is the one of scipy's own factorization of the interleaved mass
+    (ARPACK from the same first vector) to 1e-9."""
     import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
 
     from femgrid_mpm import stability
     from helpers import advanced_benchmark_block
@@ -110,21 +112,26 @@ def test_large_problems_solve_with_the_mass_component_by_component(monkeypatch):
     # q2 (no weak nodes lumped: M is N.T diag(m) N) on ~1,000 nodes, above the dense problems' 1500 dofs
     scene = advanced_benchmark_block("q2", steps=0, n=4000).scene.with_overrides(
         supports=[{"where": "x <= 5.0", "fix": ["x"]}])
-    reference = Simulation(scene).critical_dt
-    built = []
-    original = stability._ComponentSolve
+    built, problems = [], []
+    original, largest = stability._ComponentSolve, stability.largest_frequency_squared
 
     def recording(nodal, free):
         solve = original(nodal, free)
         built.append((solve, sp.kron(nodal, sp.identity(2), format="csr")[free][:, free]))
         return solve
 
-    monkeypatch.setattr(stability, "LARGE_PROBLEM", 0)
+    def recording_problem(stiffness, mass, solve=None):
+        problems.append((stiffness, mass))
+        return largest(stiffness, mass, solve)
+
     monkeypatch.setattr(stability, "_ComponentSolve", recording)
-    simulation = Simulation(scene)
-    # ARPACK stops at a relative tolerance of 1e-4 from a starting vector it draws afresh at each
-    # call in a process: two estimates of one step differ by about that much (1.2e-4 seen)
-    assert simulation.critical_dt == pytest.approx(reference, rel=1e-3)
+    monkeypatch.setattr(stability, "largest_frequency_squared", recording_problem)
+    critical = Simulation(scene).critical_dt
+    (stiffness, mass), = problems
+    assert mass.shape[0] > stability.DENSE_LIMIT
+    reference = spla.eigsh(stiffness, k=1, M=mass.tocsc(), which="LA", tol=1e-4,
+                           v0=stability.arpack_start(mass.shape[0]), return_eigenvectors=False)[0]
+    assert critical == pytest.approx(2 / np.sqrt(reference), rel=1e-9)
     (solve, mass), = built
     assert len({id(factors) for _, factors in solve.parts}) == 2  # the components apart
     x = np.random.default_rng(5).normal(size=mass.shape[0])
@@ -139,3 +146,77 @@ def test_the_estimate_of_a_large_problem_is_the_same_every_time():
         **{"grid.basis": "bspline3", "grid.spacing": 0.0625, "solver.mass": "consistent", "time.dt": "auto"})
     steps = {Simulation(scene).critical_dt for _ in range(3)}
     assert len(steps) == 1
+
+
+@pytest.mark.parametrize("basis,mass,overrides", [("q1", "lumped", {}), ("bspline3", "hrz", {}),
+                                                  ("bspline3", "consistent", {"solver.mix": 0.25})])
+def test_small_symmetric_problems_give_the_general_eigenvalue(monkeypatch, basis, mass, overrides):
+    """Below 1500 degrees of freedom the largest eigenvalue of ``B K`` with a symmetric ``B``
+    (one diagonal for velocity and acceleration, ``D^-1 C D^-1``; or a mixed mass's
+    ``M^-1 C M^-1``) is that of ``L^T K L`` by B's Cholesky factor: it equals the largest
+    modulus of the general (non-symmetric) eigenvalues of the product to 1e-12."""
+    from femgrid_mpm import stability
+    from helpers import benchmark_block
+
+    seen = []
+    original = stability.largest_eigenvalue_of_product
+
+    def recording(inverse_mass, stiffness, symmetric=False):
+        value = original(inverse_mass, stiffness, symmetric)
+        seen.append((value, symmetric, inverse_mass.toarray(), stiffness.toarray()))
+        return value
+
+    monkeypatch.setattr(stability, "largest_eigenvalue_of_product", recording)
+    scene = benchmark_block(basis, mass, 400).with_overrides(**{"time.dt": "auto", **overrides})
+    Simulation(scene)
+    (value, symmetric, inverse_mass, stiffness), = seen
+    assert symmetric and 0 < stiffness.shape[0] <= 1500
+    general = np.max(np.abs(np.linalg.eigvals(inverse_mass @ stiffness)))
+    assert value == pytest.approx(general, rel=1e-12)
+
+
+def test_a_singular_symmetric_inverse_mass_takes_the_general_eigenvalues():
+    """A symmetric ``B`` with a zero row (a degree of freedom without mass) has no Cholesky
+    factor: the general eigenvalues answer, the largest of ``diag(0, 1, 2) K``."""
+    import scipy.sparse as sp
+
+    from femgrid_mpm.stability import largest_eigenvalue_of_product
+
+    stiffness = sp.csr_matrix(np.array([[2.0, -1.0, 0.0], [-1.0, 2.0, -1.0], [0.0, -1.0, 2.0]]))
+    inverse_mass = sp.diags([0.0, 1.0, 2.0]).tocsr()
+    expected = np.max(np.abs(np.linalg.eigvals(inverse_mass.toarray() @ stiffness.toarray())))
+    assert largest_eigenvalue_of_product(inverse_mass, stiffness, symmetric=True) == pytest.approx(expected, rel=1e-14)
+
+
+def test_a_large_mixed_or_treated_mass_solves_component_by_component(monkeypatch):
+    """Above DENSE_LIMIT a mass other than the points' consistent one (a mixed mass, ``mix =
+    0.25``) gives ``M^-1 C M^-1 K`` to ARPACK through each component's factors of the nodal M:
+    cubic splines on the bar at h = 0.0625 have the critical step of scipy's own factors of the
+    interleaved mass (ARPACK from the same first vector) to 1e-9."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from femgrid_mpm import stability
+
+    seen = []
+    original = stability._largest_frequency_squared
+
+    def recording(inertia, point_mass, free, stiffness):
+        seen.append((inertia, free, stiffness))
+        return original(inertia, point_mass, free, stiffness)
+
+    monkeypatch.setattr(stability, "_largest_frequency_squared", recording)
+    scene = bundled_scene("vibrating_bar").with_overrides(
+        **{"grid.basis": "bspline3", "grid.spacing": 0.0625, "solver.mass": "consistent", "solver.mix": 0.25,
+           "time.dt": "auto"})
+    critical = Simulation(scene).critical_dt
+    (inertia, free, stiffness), = seen
+    assert inertia.consistent is not None and stiffness.shape[0] > stability.DENSE_LIMIT
+    mass, consistent = (sp.kron(matrix, sp.identity(2), format="csc")[free][:, free]
+                        for matrix in (inertia.matrix, inertia.consistent))
+    factors, n = spla.splu(mass), stiffness.shape[0]
+    operator = spla.LinearOperator((n, n), dtype=float,
+                                   matvec=lambda x: factors.solve(consistent @ factors.solve(stiffness @ x)))
+    reference = np.max(np.abs(spla.eigs(operator, k=1, which="LM", tol=1e-4, v0=stability.arpack_start(n),
+                                        return_eigenvectors=False)))
+    assert critical == pytest.approx(2 / np.sqrt(reference), rel=1e-9)
