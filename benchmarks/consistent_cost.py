@@ -79,7 +79,7 @@ def to_end_time(basis: str, mass: str, n: int, settings: dict | None = None) -> 
     "auto"`` to :data:`TRANSITS` h / c; the set-up is ``Simulation(scene)``, whose estimate of the
     critical step is most of it."""
     scene = block_scene(basis, mass, n).with_overrides(**{"time.dt": "auto", "time.end": TRANSITS / WAVE_SPEED,
-                                                          **(settings if mass != "lumped" else {})})
+                                                          **((settings or {}) if mass != "lumped" else {})})
     start = time.perf_counter()
     simulation = Simulation(scene)
     built = time.perf_counter()

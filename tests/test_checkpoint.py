@@ -382,3 +382,24 @@ def test_a_resumed_run_counts_the_analyses_of_the_uninterrupted_one():
     assert reference.mass._choices.factored.analyses == 0 and reference.mass._choices.trial.start is None
     assert np.array_equal(resumed.particles.v, reference.particles.v)
     assert np.array_equal(resumed.particles.x, reference.particles.x)
+
+
+def test_an_auto_step_another_version_estimated_in_its_last_bits_resumes():
+    """With ``dt = "auto"`` a checkpoint whose step differs from this version's estimate by at
+    most 1e-12 relative (an earlier version's estimate of the same step) resumes on this
+    version's step; a step further off (1e-9) is refused, as is any difference with a given dt."""
+    auto = bundled_scene("drifting_bar").with_overrides(output=None)
+    given = auto.with_overrides(**{"time.dt": Simulation(auto).dt})
+    for scene in (auto, given):
+        simulation = Simulation(scene)
+        simulation.advance()
+        arrays, values = simulation.state()
+        for factor, resumes in ((1 + 4e-16, scene is auto), (1 + 1e-9, False)):
+            changed = {**values, "dt": values["dt"] * factor}
+            resumed = Simulation(scene)
+            if resumes:
+                resumed.restore(arrays, changed)
+                assert resumed.dt == simulation.dt and resumed.step_index == 1
+            else:
+                with pytest.raises(ValueError, match="dt"):
+                    resumed.restore(arrays, changed)
