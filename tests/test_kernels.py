@@ -299,6 +299,23 @@ def test_flat_kernels_serve_a_basis_with_no_special_form(monkeypatch, mass):
     np.testing.assert_array_equal(flat.transfer.grid_mass, folded.transfer.grid_mass)
 
 
+def _iterations_of(simulation, kind: str, steps: int) -> list[int]:
+    """CG's iterations of each ``kind`` solve ("velocity" or "acceleration") in ``steps`` steps."""
+    counts, solve = [], simulation.mass.solve
+
+    def counted(rhs, kind_of="velocity", frame=None):
+        before = simulation.mass.iterations
+        solution = solve(rhs, kind_of, frame=frame)
+        if kind_of == kind:
+            counts.append(simulation.mass.iterations - before)
+        return solution
+
+    simulation.mass.solve = counted
+    for _ in range(steps):
+        simulation.advance()
+    return counts
+
+
 def test_the_velocity_guess_advances_the_last_grid_velocity():
     """CG's first guess of the consistent velocity solve is the last grid velocity
     plus dt times its acceleration, in the new frame (exact for points that keep
@@ -311,20 +328,7 @@ def test_the_velocity_guess_advances_the_last_grid_velocity():
         simulation = Simulation(benchmark_block("q1", "consistent", 400, linear_solver="cg"))
         if not advanced:
             simulation.mass.time_step = None  # falls back to extrapolation
-        counts = []
-        solve = simulation.mass.solve
-
-        def counted(rhs, kind="velocity", frame=None, *, simulation=simulation, counts=counts, solve=solve):
-            before = simulation.mass.iterations
-            solution = solve(rhs, kind, frame=frame)
-            if kind == "velocity":
-                counts.append(simulation.mass.iterations - before)
-            return solution
-
-        simulation.mass.solve = counted
-        for _ in range(8):
-            simulation.advance()
-        runs[advanced] = (counts, simulation.particles.v.copy())
+        runs[advanced] = (_iterations_of(simulation, "velocity", 8), simulation.particles.v.copy())
     assert all(a < b for a, b in zip(runs[True][0][2:], runs[False][0][2:]))
     np.testing.assert_allclose(runs[True][1], runs[False][1], rtol=0, atol=1e-6 * np.abs(runs[False][1]).max())
 
@@ -340,20 +344,7 @@ def test_the_acceleration_guess_is_the_cubic_through_the_last_four():
         simulation = Simulation(benchmark_block("q1", "consistent", 400, linear_solver="cg"))
         assert simulation.mass.cubic_guess  # the paper's scheme: one pass a step
         simulation.mass.cubic_guess = cubic
-        counts = []
-        solve = simulation.mass.solve
-
-        def counted(rhs, kind="velocity", frame=None, *, simulation=simulation, counts=counts, solve=solve):
-            before = simulation.mass.iterations
-            solution = solve(rhs, kind, frame=frame)
-            if kind == "acceleration":
-                counts.append(simulation.mass.iterations - before)
-            return solution
-
-        simulation.mass.solve = counted
-        for _ in range(80):
-            simulation.advance()
-        runs[cubic] = (sum(counts[10:]), simulation.particles.v.copy())
+        runs[cubic] = (sum(_iterations_of(simulation, "acceleration", 80)[10:]), simulation.particles.v.copy())
     assert runs[True][0] <= 0.9 * runs[False][0]
     np.testing.assert_allclose(runs[True][1], runs[False][1], rtol=0, atol=1e-6 * np.abs(runs[False][1]).max())
 
