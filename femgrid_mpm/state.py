@@ -61,8 +61,9 @@ def restore_state(simulation, arrays: dict, values: dict) -> None:
             raise ValueError(f"particles.{name}: shape {array.shape} {array.dtype}, this scene has {current.shape} {current.dtype}")
     # dt = "auto": another version's estimate of the same step may differ in its last bits; the
     # run goes on with this version's step
-    auto = simulation.scene.time.dt == "auto"
-    if values["dt"] != simulation.dt and not (auto and abs(values["dt"] - simulation.dt) <= 1e-12 * simulation.dt):
+    dt = values["dt"]
+    near = isinstance(dt, float) and simulation.scene.time.dt == "auto" and abs(dt - simulation.dt) <= 1e-12 * simulation.dt
+    if dt != simulation.dt and not near:
         raise ValueError(f"dt {values['dt']!r} s, this scene has {simulation.dt!r} s")
     step, time = values["step"], values["time"]
     if isinstance(step, bool) or not isinstance(step, int) or not 0 <= step <= simulation.n_steps:

@@ -403,3 +403,13 @@ def test_an_auto_step_another_version_estimated_in_its_last_bits_resumes():
             else:
                 with pytest.raises(ValueError, match="dt"):
                     resumed.restore(arrays, changed)
+
+
+@pytest.mark.parametrize("dt", ["0.01", None, [1]])
+def test_a_malformed_step_in_a_checkpoint_is_refused_as_such(dt):
+    """A checkpoint's dt that is not a number is refused with the dt message (a ValueError), also
+    where the scene's dt is "auto" and a near step would resume."""
+    scene = bundled_scene("drifting_bar").with_overrides(output=None)
+    arrays, values = Simulation(scene).state()
+    with pytest.raises(ValueError, match="dt"):
+        Simulation(scene).restore(arrays, {**values, "dt": dt})

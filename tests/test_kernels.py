@@ -333,34 +333,6 @@ def test_the_velocity_guess_advances_the_last_grid_velocity():
     np.testing.assert_allclose(runs[True][1], runs[False][1], rtol=0, atol=1e-6 * np.abs(runs[False][1]).max())
 
 
-def test_the_acceleration_guess_is_the_cubic_through_the_last_four():
-    """CG's first guess of the acceleration is the cubic through the last four solutions (one
-    pass a step): on the benchmark's q1 block (400 points, Gauss-Seidel CG) the acceleration
-    solves of steps 10-80 took 338 iterations against 420 with the line through the last two
-    (measured); asserted: at least 10% fewer, and both runs' velocities within CG's tolerance
-    (1e-6 of the largest; they differ by 1.2e-7)."""
-    runs = {}
-    for cubic in (True, False):
-        simulation = Simulation(benchmark_block("q1", "consistent", 400, linear_solver="cg"))
-        assert simulation.mass.cubic_guess  # the paper's scheme: one pass a step
-        simulation.mass.cubic_guess = cubic
-        runs[cubic] = (sum(_iterations_of(simulation, "acceleration", 80)[10:]), simulation.particles.v.copy())
-    assert runs[True][0] <= 0.9 * runs[False][0]
-    np.testing.assert_allclose(runs[True][1], runs[False][1], rtol=0, atol=1e-6 * np.abs(runs[False][1]).max())
-
-
-def test_a_scheme_of_uneven_sub_steps_extrapolates_the_acceleration_by_a_line():
-    """yoshida4's three sub-steps a step are unevenly spaced in time: the cubic through the
-    last four accelerations took 4% more iterations there (manufactured solution with rollers,
-    q2), so its mass model keeps the line through two."""
-    scene = benchmark_block("q1", "consistent", 400, linear_solver="cg").with_overrides(**{"solver.scheme": "yoshida4"})
-    simulation = Simulation(scene)
-    assert not simulation.mass.cubic_guess
-    for _ in range(6):
-        simulation.advance()
-    assert len(simulation.mass._previous["acceleration"]) == 2
-
-
 def test_hrz_weights_follow_the_points():
     """HRZ's weight matrix, built when gravity asks for it, is dropped when the points
     move: read between steps it is the one of the points' new places."""

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..schemes import SCHEMES
 from .consistent import ConsistentMass
 from .layout import DIRECT_LIMIT
 from .constraint import ConstrainedMass, NodeConstraint
@@ -105,7 +104,6 @@ def _unconstrained(solver, grid, cells: CellMasses, time_step: float | None, fix
         layer_width=round(grid.discretization.element_width / grid.spacing),  # in lattice steps
         time_step=time_step,
         solves=solves,
-        cubic_guess=SCHEMES[solver.scheme].passes == 1,
         weak_ratio=weak_ratio,
         weak_mix=solver.weak_mix,
         interior=interior_ratio(grid) if weak_ratio > 0 and grid.nonnegative else 0.0,

@@ -223,20 +223,16 @@ def _product_and_curvature(A, p):
 
 
 #: CG's first guess (:func:`initial_guess`): the lumped solution; the last
-#: solution; two solutions extrapolated; the last velocity advanced by its acceleration;
-#: four solutions extrapolated by the cubic through them
-GUESS_LUMPED, GUESS_LAST, GUESS_EXTRAPOLATED, GUESS_ADVANCED, GUESS_CUBIC = range(5)
-#: solutions of each kind kept for the next guess: the acceleration's cubic takes four
-HISTORY = {"acceleration": 4, "velocity": 2}
+#: solution; two solutions extrapolated; the last velocity advanced by its acceleration
+GUESS_LUMPED, GUESS_LAST, GUESS_EXTRAPOLATED, GUESS_ADVANCED = range(4)
 
 
 @compiled()
-def _guess(mode, rhs, lumped, tiny, inverse_diagonal, first, second, third, fourth, dt, shift, columns, excluded):
+def _guess(mode, rhs, lumped, tiny, inverse_diagonal, first, second, dt, shift, columns, excluded):
     """CG's first guess on the system's columns, one or two (one pass; numpy's where-chains
     took ~0.5 ms a solve at 27,000 nodes).  ``first``/``second``: the last and the older
     solution (extrapolated), the last velocity and acceleration (advanced), as (n_nodes, 2)
-    arrays of all columns; ``third``/``fourth`` the two before (the cubic).  A node takes the
-    history's value where the history knows it
+    arrays of all columns.  A node takes the history's value where the history knows it
     (nonzero), the lumped solution ``rhs / m_i`` elsewhere, zero where excluded.  The
     columns and the shift are locals (one column: taken twice), as numba would load array
     elements again after every store of the guess: 3.5x faster at 1e6 points than a loop
@@ -262,12 +258,6 @@ def _guess(mode, rhs, lumped, tiny, inverse_diagonal, first, second, third, four
             s0, s1 = second[i, j0], second[i, j1]
             known = ((s0 != 0.0) & (f0 != 0.0)) | ((s1 != 0.0) & (f1 != 0.0))
             g0, g1 = 2.0 * f0 - s0, 2.0 * f1 - s1
-        elif mode == GUESS_CUBIC:
-            s0, s1, t0, t1, u0, u1 = second[i, j0], second[i, j1], third[i, j0], third[i, j1], fourth[i, j0], fourth[i, j1]
-            known = (((f0 != 0.0) & (s0 != 0.0) & (t0 != 0.0) & (u0 != 0.0))
-                     | ((f1 != 0.0) & (s1 != 0.0) & (t1 != 0.0) & (u1 != 0.0)))
-            g0 = 4.0 * (f0 + t0) - 6.0 * s0 - u0
-            g1 = 4.0 * (f1 + t1) - 6.0 * s1 - u1
         else:
             known = mode == GUESS_LAST and ((f0 != 0.0) | (f1 != 0.0))
             g0, g1 = f0, f1
@@ -292,30 +282,20 @@ def initial_guess(previous: dict, frame: np.ndarray | None, kind: str, rhs: np.n
     (for a rigid motion that is already exact).  ``previous`` is the history
     (the last two solutions of each kind, and the frame of the velocities in it),
     ``frame`` this step's frame, ``tiny`` the mass below which ``lumped`` is not divided by.
-
-    The acceleration, once four solutions are known: the cubic through them, ``4 (a_1 + a_3)
-    - 6 a_2 - a_4`` (newest first), whose error is a third (quadratic) to a tenth (cubic) of the
-    straight line's on the benchmark's q1 block (its force changes by 7% of its largest value a
-    step): CG takes about one iteration fewer a step there and on the cantilever (q1 at 1e4
-    points 6.95 -> 5.87, serendipity 14.9 -> 12.7, the cantilever's q2 and gimp 6.1 -> 5.2 and
-    5.6 -> 4.6), as many on the drifting bar, where points keep crossing cells.
     """
     history = previous.get(kind, ())
     accelerations = previous.get("acceleration", ())
     columns = np.asarray(system.columns, dtype=np.int64)
     none = np.zeros((0, 2))
-    shift, third, fourth = np.zeros(len(columns)), none, none
     if (kind == "velocity" and history and accelerations and "frame" in previous and time_step
             and frame is not None):
         mode, first, second = GUESS_ADVANCED, history[-1], accelerations[-1]
         shift = (previous["frame"][0][0] - frame)[columns]
-    elif len(history) >= 4:
-        mode, first, second, third, fourth = GUESS_CUBIC, history[-1], history[-2], history[-3], history[-4]
-    elif len(history) >= 2:
-        mode, first, second = GUESS_EXTRAPOLATED, history[-1], history[-2]
+    elif len(history) == 2:
+        (mode, first, second), shift = (GUESS_EXTRAPOLATED, history[1], history[0]), np.zeros(len(columns))
     elif len(history) == 1:
-        mode, first, second = GUESS_LAST, history[0], none
+        (mode, first, second), shift = (GUESS_LAST, history[0], none), np.zeros(len(columns))
     else:
-        mode, first, second = GUESS_LUMPED, none, none
-    return _guess(mode, rhs, lumped, tiny, system.inverse_diagonal, first, second, third, fourth,
-                  float(time_step or 0.0), shift, columns, system.excluded)
+        (mode, first, second), shift = (GUESS_LUMPED, none, none), np.zeros(len(columns))
+    return _guess(mode, rhs, lumped, tiny, system.inverse_diagonal, first, second, float(time_step or 0.0), shift,
+                  columns, system.excluded)

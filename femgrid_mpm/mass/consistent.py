@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .cg import HISTORY, _preconditioned_cg, initial_guess
+from .cg import _preconditioned_cg, initial_guess
 from .direct import _direct_solve, _factor
 from .exclusion import NO_NODES, active_and_weak, unexcluded_apply, unexcluded_matrix
 from .layout import RunChoices
@@ -93,10 +93,6 @@ class ConsistentMass(MassModel):
     time_step : float, optional
         The step (s): CG's first guess of the velocity is the last step's
         grid velocity advanced by its acceleration.
-    cubic_guess : bool
-        CG's first guess of the acceleration is the cubic through the last four (False: the
-        line through the last two), for solves evenly spaced in time (a scheme of one pass a
-        step; ``yoshida4``'s three uneven sub-steps took 4% more iterations with the cubic).
     solves : bool
         Make the solve's systems (False: only ``M`` is assembled, for a model
         that solves a reduced form of it, :class:`.constraint.ConstrainedMass`).
@@ -121,7 +117,6 @@ class ConsistentMass(MassModel):
     layer_width: int = 2
     time_step: float | None = None
     solves: bool = True
-    cubic_guess: bool = True
     weak_ratio: float = 0.0
     interior: float = 0.0
     weak_mix: float = 0.02
@@ -150,7 +145,7 @@ class ConsistentMass(MassModel):
 
     def state(self) -> tuple[dict, dict]:
         """What carries from step to step, ``(arrays, values)``: CG's warm-start
-        history (the last solutions of each kind) and the counters."""
+        history (the last two solutions of each kind) and the counters."""
         arrays = {f"previous.{kind}.{index}": solution
                   for kind, history in self._previous.items() for index, solution in enumerate(history)}
         arrays.update(self._kept.arrays())
@@ -274,7 +269,7 @@ class ConsistentMass(MassModel):
         degrees of freedom; the solution is zero on the fixed and empty ones.
 
         ``kind`` ("velocity" or "acceleration") keys CG's warm start: the
-        last solutions of the same kind are extrapolated.
+        last two solutions of the same kind are extrapolated.
 
         ``frame`` (2,), optional: rhs is a momentum relative to this velocity,
         ``p - L v_ref`` (L the row sums), and the solution is the velocity
@@ -308,8 +303,7 @@ class ConsistentMass(MassModel):
             else:
                 solution[:, system.columns] = solved
         if self._keeps_history:
-            depth = HISTORY[kind] if self.cubic_guess else 2
-            self._previous[kind] = (*self._previous.get(kind, ())[1 - depth:], solution)
+            self._previous[kind] = (*self._previous.get(kind, ())[-1:], solution)
         return solution
 
     def _solve_system(self, system: "_System", part: np.ndarray, kind: str, coupled: np.ndarray | None = None,
