@@ -120,12 +120,6 @@ class _ComponentSolve(spla.LinearOperator):
         n = int(free.sum())
         super().__init__(float, (n, n))
 
-    def solve(self, vector):
-        """``M^-1 vector`` for one vector (as SuperLU's ``solve`` of :class:`_InverseSandwich`)."""
-        if np.ndim(vector) != 1:
-            raise ValueError("_ComponentSolve.solve takes one vector")
-        return self._matvec(vector)
-
     def _matvec(self, vector):
         vector = np.asarray(vector, dtype=float).ravel()
         out = np.empty_like(vector)
@@ -250,8 +244,7 @@ def _largest_frequency_squared(inertia, point_mass: np.ndarray, free: np.ndarray
         effective = sp.kron(effective, sp.identity(2), format="csr")[free][:, free]
         # one diagonal for velocity and acceleration (every model but one that divides them by
         # different masses): B = D^-1 C D^-1 is symmetric
-        symmetric = inertia.inverses[0] is inertia.inverses[1] or np.array_equal(*inertia.inverses)
-        return largest_eigenvalue_of_product(effective, stiffness, symmetric)
+        return largest_eigenvalue_of_product(effective, stiffness, symmetric=np.array_equal(*inertia.inverses))
     mass = sp.kron(inertia.matrix, sp.identity(2), format="csr")[free][:, free]
     if inertia.consistent is None:
         solve = _ComponentSolve(inertia.matrix, free) if mass.shape[0] > DENSE_LIMIT else None
@@ -271,11 +264,12 @@ class _InverseSandwich:
 
     def __init__(self, mass: sp.csr_matrix, consistent: sp.csr_matrix, nodal: sp.csr_matrix, free: np.ndarray):
         self.shape, self._consistent = mass.shape, consistent
-        self._factors = spla.splu(mass.tocsc()) if mass.shape[0] <= DENSE_LIMIT else _ComponentSolve(nodal, free)
+        # M^-1 of a vector (and, small, of the identity for toarray)
+        self._solve = spla.splu(mass.tocsc()).solve if mass.shape[0] <= DENSE_LIMIT else _ComponentSolve(nodal, free).matvec
 
     def __matmul__(self, vector: np.ndarray) -> np.ndarray:
-        return self._factors.solve(self._consistent @ self._factors.solve(vector))
+        return self._solve(self._consistent @ self._solve(vector))
 
     def toarray(self) -> np.ndarray:
-        inverse = self._factors.solve(np.eye(self.shape[0]))
+        inverse = self._solve(np.eye(self.shape[0]))
         return inverse @ self._consistent.toarray() @ inverse
