@@ -41,11 +41,13 @@ from .ldl import _diagonal_index
 from .sparse import _ROW_BY_ROW, _CompiledCSR, _product_dot
 
 
-#: a solve's work in products with the matrix: its start (a product, a sweep each way and a
-#: pass over the nodes) and each iteration (a sweep each way, with CG's step); q1 at 1e4
-#: points, two columns: a product 29 us, the start 84 us, an iteration 43.5 us
-START_WORK = 3.0
-ITERATION_WORK = 1.5
+#: a solve's work in products with the matrix: its start (the residual's pass down and the
+#: first sweep up) and each iteration (a sweep each way, with CG's step).  Fitted to the solves
+#: of 60 steps (time against iterations), two columns: start 1.5-2.8 and iteration 1.2-1.5
+#: products for q1, q2, serendipity, gimp and quadratic splines at 1e4 points and q1 on the
+#: cantilever at h = 0.0625 (a product 31-75 us)
+START_WORK = 2.0
+ITERATION_WORK = 1.4
 
 
 def cg_work(solves: int, iterations: int) -> float:

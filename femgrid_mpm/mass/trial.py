@@ -41,8 +41,10 @@ ANALYSIS_WORK = 140
 FACTOR_SHARE = 0.5
 SOLVE_SHARE = 0.65
 #: CG's iterations a solve whose work :class:`FactoredRate`'s must exceed for CG to be tried
-#: (q1's block at 1e4 points took 3.5, its velocity 2 and its acceleration 5; gimp's at 1e3 4.2)
-TRY_ITERATIONS = 4.5
+#: (q1's block at 1e4 points took 3.5, its velocity 2 and its acceleration 5; gimp's at 1e3
+#: 4.2): 19.4 products a step of two solves, above what systems factored on one layout cost
+#: (q1, q2 and serendipity at 1e3 points 6-8, gimp's with its weak nodes lumped 16.7)
+TRY_ITERATIONS = 5.5
 
 
 @dataclass
@@ -107,11 +109,23 @@ class RefactorRate:
                    _or_none(float, values[4]), int(values[5]))
 
 
+#: an entry of the kept factors in a solve with them, in entries of the matrix in a product (the
+#: triangular solves go column by column through both permutations).  Fitted as
+#: :data:`.gauss_seidel.START_WORK`: 1.0-1.1 on q1's cantilever at h = 0.0625 (fill 3.2), 1.1-1.2
+#: on serendipity's block at 1e4 points (fill 4.0), 1.4-1.7 on quadratic splines' (fill 10).  The
+#: trials then price CG against the factors at 28.9 against 30.6 and 83.0 against 96.0 products
+#: a step on the two blocks (CG took 2.05-2.22 against 2.38-2.47 and 7.9 against 11.1 ms a step,
+#: interleaved), 13.8 against 13.0 on the cantilever (2.78 against 2.54 ms)
+FACTOR_ENTRY_WORK = 1.1
+
+
 def kept_work(solves: int, iterations: int, refactors: int, fill: float) -> float:
     """The work of solves on kept factors holding ``fill`` entries per matrix entry, in products
-    with the matrix: each solve a product and a solve with the factors, and as many again for
-    each of its ``iterations``; each refactorization :data:`REFACTOR_SOLVES` solves."""
-    return (solves + iterations) * (fill + 1.0) + refactors * REFACTOR_SOLVES * fill
+    with the matrix: each solve a product and a solve with the factors (:data:`FACTOR_ENTRY_WORK`
+    a factor's entry), and as many again for each of its ``iterations``; each refactorization
+    :data:`REFACTOR_SOLVES` solves."""
+    solve = FACTOR_ENTRY_WORK * fill
+    return (solves + iterations) * (solve + 1.0) + refactors * REFACTOR_SOLVES * solve
 
 
 def factored_work(layout: "SymbolicLDL", solves: int) -> float:
@@ -190,7 +204,9 @@ class CgTrial:
     Measured, ms a step on kept factors against CG, and the verdict: q1's block at 1e4 points
     1.79 against 1.18, CG; the cantilever at h = 0.0625, whose kept factors take one iteration
     an acceleration, q1 2.71 against 2.95 and open-knot quadratic splines 4.9 against 7.6, kept
-    factors; the drifting bar at h = 0.05, q1 2.23 against 1.47-1.59, CG."""
+    factors; the drifting bar at h = 0.05, q1 2.23 against 1.47-1.59, CG; with ``dt = "auto"``,
+    serendipity's block at 1e4 points 2.38-2.47 against 2.05-2.22 and quadratic splines' 11.1
+    against 7.9, CG."""
 
     fill: float = 0.0  # entries of the last kept factors per entry of their matrix
     start: int | None = None  # the mass's CG iterations when the trial began (None: not begun)
