@@ -123,6 +123,37 @@ def test_boundary_layer_is_symmetric_positive_definite_and_cuts_iterations():
     assert 0 < 2 * layered[2] < alone[2]
 
 
+def test_boundary_layer_keeps_its_layout_while_its_nodes_stay():
+    """The layer's block is factored every step by the compiled ``L D L^T`` on a layout kept
+    while the system's excluded and weak nodes stay: the next step takes the same layout
+    object, its solve is numpy's dense solve of ``M[nodes][:, nodes]`` to 1e-12 and zero
+    outside the layer, its rows are ``M[nodes, :]`` exactly, and other weak nodes make a
+    new layout."""
+    from femgrid_mpm.mass.preconditioners import BoundaryLayer
+
+    simulation = Simulation(block_scene("bspline3", "consistent", 2500))
+    mass = simulation.mass
+    mass.linear_solver = "cg"
+    simulation.advance()
+    first = mass._layer_layouts[(0, 1)]
+    simulation.advance()
+    system = mass._systems[0]
+    layer = system.boundary_layer(mass.preconditioner.lattice_shape, mass._weak, mass._layer_layouts)
+    assert layer.layout is first
+    matrix = sp.csr_matrix((system.matrix.data, system.matrix.indices, system.matrix.indptr), shape=system.matrix.shape)
+    rows = matrix[layer.nodes]
+    assert abs(rows - sp.csr_matrix(layer.rows)).max() == 0.0
+    rhs = np.random.default_rng(1).standard_normal((matrix.shape[0], 2))
+    solution = layer.factors.solve(rhs)
+    expected = np.linalg.solve(rows[:, layer.nodes].toarray(), rhs[layer.nodes])
+    np.testing.assert_allclose(solution[layer.nodes], expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    assert not np.delete(solution, layer.nodes, axis=0).any()
+    weak = mass._weak.copy()
+    weak[np.flatnonzero(~system.excluded)[len(layer.nodes) // 2]] = True
+    other = BoundaryLayer.build(system.matrix, system.excluded, weak, mass.preconditioner.lattice_shape, first)
+    assert other.layout is not first
+
+
 def test_no_boundary_layer_for_a_thin_body():
     """A body 3 cells thick lies within the layer's width of its edges everywhere: the
     layer would hold every kept node (above LAYER_LIMIT), so it is not built, and CG
@@ -164,7 +195,7 @@ def test_a_layer_that_is_not_positive_definite_falls_back_to_the_tensor_precondi
     mass.linear_solver = "cg"
     mass.tolerance = 1e-12
     simulation.advance()
-    monkeypatch.setattr(_System, "boundary_layer", lambda self, shape, weak: Negative())
+    monkeypatch.setattr(_System, "boundary_layer", lambda self, shape, weak, layouts=None: Negative())
     system = mass._systems[0]
     rhs = np.where(system.excluded[:, None], 0.0, simulation.context.force)
     tensor = mass.preconditioner.scaled(system)

@@ -14,8 +14,8 @@ from femgrid_mpm.mass import layout, ldl, trial
 from femgrid_mpm.mass.direct import _factor
 from femgrid_mpm.mass.reused import REFACTOR_ITERATIONS, ReusedFactors
 from femgrid_mpm.mass.gauss_seidel import cg_work
-from femgrid_mpm.mass.trial import (ANALYSIS_WORK, FACTOR_ENTRY_WORK, RATE_LIMIT, RATE_WINDOW, TRY_ITERATIONS, FactoredRate,
-                                    RefactorRate, kept_work)
+from femgrid_mpm.mass.trial import (ANALYSIS_WORK, FACTOR_ENTRY_WORK, RATE_LIMIT, RATE_WINDOW, TRY_ITERATIONS,
+                                    FactoredRate, RefactorRate, kept_work)
 from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
 from helpers import advanced_benchmark_block, benchmark_block
@@ -310,6 +310,8 @@ def test_factored_rate_counts_the_analyses_of_new_layouts():
             assert rate.per_step == 2.0
     assert ANALYSIS_WORK == 140 and rate.per_step == 9.0 and two.analyses == 4 and two.per_step == 18.0
     assert cg_work(2, 2 * TRY_ITERATIONS) == pytest.approx(19.4, rel=1e-12) and not rate.pays_to_try(2)
+    rate.per_step = 19.3
+    assert not rate.pays_to_try(2)
     rate.per_step = 19.5
     assert rate.pays_to_try(2)
     rate.last = False

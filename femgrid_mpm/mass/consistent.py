@@ -142,6 +142,7 @@ class ConsistentMass(MassModel):
         self._choices = RunChoices()  # what "auto" measured during the run
         self._over_pattern = PatternMatrix()
         self._layout = None  # the systems' layout (.layout), kept while the active and weak nodes stay
+        self._layer_layouts = {}  # CG's boundary layer: each system's last layout (.preconditioners)
 
     def state(self) -> tuple[dict, dict]:
         """What carries from step to step, ``(arrays, values)``: CG's warm-start
@@ -373,7 +374,8 @@ class ConsistentMass(MassModel):
             return _direct_solve(system.factors, system.matrix, rhs)
         guess = self._initial_guess(rhs, kind, system)
         tensor = None if self.preconditioner is None else self.preconditioner.scaled(system)
-        layer = None if tensor is None else system.boundary_layer(self.preconditioner.lattice_shape, self._weak)
+        layer = None if tensor is None else \
+            system.boundary_layer(self.preconditioner.lattice_shape, self._weak, self._layer_layouts)
         solution, converged, iterations = _preconditioned_cg(
             system.matrix, rhs, guess, system.inverse_diagonal, self.tolerance, self.max_iterations, tensor, layer
         )

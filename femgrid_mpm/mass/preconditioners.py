@@ -11,7 +11,7 @@ import scipy.sparse as sp
 
 from ..kernels.arithmetic import fused
 from ..kernels.compiled import compiled
-from .direct import _factor, _rows_and_block
+from .ldl import NumericLDL, SymbolicLDL, _diagonal_index
 from .sparse import _CompiledCSR, _transpose_times_dense
 
 if TYPE_CHECKING:  # system.py imports this module
@@ -60,6 +60,48 @@ LAYER_WIDTH = 3
 LAYER_LIMIT = 0.5
 
 
+@dataclass(frozen=True)
+class LayerLayout:
+    """What a :class:`BoundaryLayer` keeps while its system's excluded and weak nodes stay: its
+    nodes, the ordering and structure of its factors, and ``M[nodes, :]``'s structure with each
+    entry's place in ``M``'s data (finding the nodes and taking the rows by scipy's indexing
+    took 0.5 of a step's 0.9 ms of layer on cubic splines' block at 1e4 points)."""
+
+    empty: np.ndarray  # the excluded or weak nodes it was made for
+    excluded: np.ndarray
+    nodes: np.ndarray
+    symbolic: SymbolicLDL
+    rows_indptr: np.ndarray
+    rows_indices: np.ndarray
+    rows_source: np.ndarray
+
+    def fits(self, matrix, excluded: np.ndarray, empty: np.ndarray) -> bool:
+        return (np.array_equal(empty, self.empty) and np.array_equal(excluded, self.excluded)
+                and self.symbolic.describes(matrix, self.symbolic.excluded))
+
+    @classmethod
+    def of(cls, matrix, excluded: np.ndarray, empty: np.ndarray, lattice_shape: tuple) -> "LayerLayout | None":
+        """The layout of a system's layer, None if it is empty or holds more than
+        :data:`LAYER_LIMIT` of the kept nodes."""
+        lattice = np.column_stack(np.unravel_index(np.arange(len(excluded)), lattice_shape))
+        nodes = np.flatnonzero(_near_empty_nodes(lattice, empty, LAYER_WIDTH) & ~excluded)
+        if nodes.size == 0 or nodes.size > LAYER_LIMIT * np.count_nonzero(~excluded):
+            return None
+        outside = np.ones(len(excluded), dtype=bool)
+        outside[nodes] = False
+        diagonal = matrix.upper_start if isinstance(matrix, _CompiledCSR) else None
+        if diagonal is None:  # (a CSR matrix with every diagonal stored: the scipy path's systems)
+            diagonal = _diagonal_index(matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64))
+        symbolic = SymbolicLDL.analyse(matrix.indptr, matrix.indices, diagonal, outside)
+        starts, stops = matrix.indptr[nodes].astype(np.int64), matrix.indptr[nodes + 1].astype(np.int64)
+        rows_indptr = np.zeros(len(nodes) + 1, dtype=np.int64)
+        np.cumsum(stops - starts, out=rows_indptr[1:])
+        source = np.repeat(starts - rows_indptr[:-1], stops - starts) + np.arange(rows_indptr[-1])
+        # the matrix's own index types: the products compile once for both
+        return cls(empty.copy(), excluded.copy(), nodes, symbolic, rows_indptr.astype(matrix.indptr.dtype),
+                   np.asarray(matrix.indices)[source], source)
+
+
 @dataclass
 class BoundaryLayer:
     """Completes :class:`TensorPreconditioner` where a body's edge makes ``M`` unlike a tensor product.
@@ -70,7 +112,8 @@ class BoundaryLayer:
     after 8 iterations, 90% of it sat within 3 nodes of an excluded one
     (cubic splines, 1e5 points).  The layer of nodes within
     :data:`LAYER_WIDTH` of such nodes gets an exact solve with its block
-    ``M_LL`` (SuperLU, factored once per step), in a symmetric
+    ``M_LL`` (the compiled ``L D L^T`` of :mod:`.ldl`, factored every step on the
+    layer's layout, which is analysed again only when the layer's nodes change), in a symmetric
     multiplicative Schwarz sweep, layer - tensor - layer::
 
         z  = R^T M_LL^-1 R r
@@ -90,13 +133,17 @@ class BoundaryLayer:
     the kept nodes (a thin body) is not built: factoring it costs more than
     the iterations it saves (a body 4 cells thick, 86% in the layer: 109
     against 89 ms per step).  Cubic splines, 1e5 points: 5 + 14 -> 1 + 4
-    iterations per step (velocity + acceleration), for ~5 ms of factoring
-    per step.
+    iterations per step (velocity + acceleration).  The layer's block is a
+    band a few nodes wide along the edges, whose factor fills little: its
+    ``L D L^T`` took 0.4 ms a step on the block of 1e4 points where
+    SuperLU's factorization, with the check of its pivots, took 2.4 ms.
 
     Attributes
     ----------
     nodes : ndarray of int, shape (n_layer,)
-    factors : SuperLU of ``M_LL``
+    factors : NumericLDL
+        ``M_LL = L D L^T`` on ``layout``, the system's matrix with every node
+        outside the layer excluded; its solves read and write the layer's rows only.
     rows : csr_matrix, shape (n_layer, n_nodes)
         ``M[nodes, :]``; ``M[:, nodes]`` is its transpose (``M`` symmetric),
         applied by :func:`_transpose_times_dense` (a CSR matrix of the
@@ -104,33 +151,38 @@ class BoundaryLayer:
     """
 
     nodes: np.ndarray
-    factors: object
+    factors: NumericLDL
     rows: sp.csr_matrix
+    layout: LayerLayout
 
     @classmethod
     def build(cls, matrix: sp.csr_matrix, excluded: np.ndarray, weak: np.ndarray,
-              lattice_shape: tuple) -> "BoundaryLayer | None":
+              lattice_shape: tuple, last: LayerLayout | None = None) -> "BoundaryLayer | None":
         """The layer of a system, or None if it is empty, holds more than
-        :data:`LAYER_LIMIT` of the kept nodes, or its block is singular (CG
-        then meets the singularity and reports it, as without a layer)."""
-        lattice = np.column_stack(np.unravel_index(np.arange(len(excluded)), lattice_shape))
-        nodes = np.flatnonzero(_near_empty_nodes(lattice, excluded | weak, LAYER_WIDTH) & ~excluded)
-        if nodes.size == 0 or nodes.size > LAYER_LIMIT * np.count_nonzero(~excluded):
+        :data:`LAYER_LIMIT` of the kept nodes, or its block is singular (a pivot
+        below :data:`.direct.PIVOT_RATIO` of its diagonal entry: CG then meets
+        the singularity and reports it, as without a layer).  ``last``: an
+        earlier layer's layout, taken again if it fits this one."""
+        empty = excluded | weak
+        layout = last if last is not None and last.fits(matrix, excluded, empty) else \
+            LayerLayout.of(matrix, excluded, empty, lattice_shape)
+        if layout is None:
             return None
-        rows, block = _rows_and_block(matrix, nodes)
-        factors = _factor(block)
+        factors, _ = layout.symbolic.factor(matrix.data)
         if factors is None:
             return None
-        return cls(nodes, factors, _CompiledCSR(rows))
+        rows = _CompiledCSR((matrix.data[layout.rows_source], layout.rows_indices, layout.rows_indptr),
+                            shape=(len(layout.nodes), matrix.shape[1]), copy=False)
+        return cls(layout.nodes, factors, rows, layout)
 
     def sweep(self, r: np.ndarray, tensor_solve) -> np.ndarray:
         """``z = P^-1 r`` for r of shape (n_nodes, k); ``tensor_solve(v)`` is ``T^-1 v``."""
-        nodes = self.nodes
-        z = np.zeros_like(r)
-        z[nodes] = self.factors.solve(np.ascontiguousarray(r[nodes]))
-        rows = self.rows
+        nodes, rows = self.nodes, self.rows
+        z = self.factors.solve(r)  # zero outside the layer
         z += tensor_solve(r - _transpose_times_dense(rows.indptr, rows.indices, rows.data, z[nodes], r.shape[0]))
-        z[nodes] += self.factors.solve(np.ascontiguousarray(r[nodes] - self.rows @ z))
+        residual = np.zeros_like(r)
+        residual[nodes] = r[nodes] - rows @ z
+        z += self.factors.solve(residual)
         return z
 
 

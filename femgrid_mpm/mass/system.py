@@ -41,11 +41,18 @@ class _System:
     layout: "SymbolicLDL | None" = None
     ldl: "NumericLDL | None" = None
 
-    def boundary_layer(self, lattice_shape: tuple, weak: np.ndarray) -> "BoundaryLayer | None":
+    def boundary_layer(self, lattice_shape: tuple, weak: np.ndarray,
+                       layouts: dict | None = None) -> "BoundaryLayer | None":
         """CG's boundary layer (:class:`BoundaryLayer`), built at the first solve of the
-        step and shared by the velocity and acceleration solves."""
+        step and shared by the velocity and acceleration solves.  ``layouts``, kept by the
+        caller over the steps, holds each system's last layer layout
+        (:class:`.preconditioners.LayerLayout`), taken again where it fits."""
         if self._layer is False:
-            self._layer = BoundaryLayer.build(self.matrix, self.excluded, weak, lattice_shape)
+            columns = tuple(self.columns)
+            last = None if layouts is None else layouts.get(columns)
+            self._layer = BoundaryLayer.build(self.matrix, self.excluded, weak, lattice_shape, last)
+            if layouts is not None and self._layer is not None:
+                layouts[columns] = self._layer.layout
         return self._layer
 
     @classmethod

@@ -111,7 +111,7 @@ class RefactorRate:
 
 #: an entry of the kept factors in a solve with them, in entries of the matrix in a product (the
 #: triangular solves go column by column through both permutations).  Fitted as
-#: :data:`.gauss_seidel.START_WORK`: 1.0-1.1 on q1's cantilever at h = 0.0625 (fill 3.2), 1.1-1.2
+#: :data:`.gauss_seidel.START_WORK`: 1.0-1.1 on q1's cantilever at h = 0.0625 (fill 3.1), 1.1-1.2
 #: on serendipity's block at 1e4 points (fill 4.0), 1.4-1.7 on quadratic splines' (fill 10).  The
 #: trials then price CG against the factors at 28.9 against 30.6 and 83.0 against 96.0 products
 #: a step on the two blocks (CG took 2.05-2.22 against 2.38-2.47 and 7.9 against 11.1 ms a step,
@@ -217,7 +217,10 @@ class CgTrial:
     factored: bool = False  # tried instead of systems factored every step (:class:`FactoredRate`)
 
     def limit(self) -> float:
-        """CG's iterations a solve at which it costs what the kept factors did at their most."""
+        """CG's iterations a solve at which it costs what the kept factors did at their most,
+        counting a CG iteration as one product and a factor's entry as one matrix entry (not
+        :data:`FACTOR_ENTRY_WORK`: a Jacobi or tensor-preconditioned iteration costs more than
+        the one product it is counted as, too)."""
         return (REFACTOR_ITERATIONS + 1) * self.fill + REFACTOR_ITERATIONS
 
     def begin(self, iterations: int, sweeps: bool, stale: bool, factored: bool = False) -> None:
