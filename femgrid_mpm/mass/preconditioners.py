@@ -11,7 +11,7 @@ import scipy.sparse as sp
 
 from ..kernels.arithmetic import fused
 from ..kernels.compiled import compiled
-from .ldl import NumericLDL, SymbolicLDL, _diagonal_index
+from .ldl import NumericLDL, SymbolicLDL, _diagonal_index, _solve
 from .sparse import _CompiledCSR, _transpose_times_dense
 
 if TYPE_CHECKING:  # system.py imports this module
@@ -60,12 +60,14 @@ LAYER_WIDTH = 3
 LAYER_LIMIT = 0.5
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class LayerLayout:
-    """What a :class:`BoundaryLayer` keeps while its system's excluded and weak nodes stay: its
-    nodes, the ordering and structure of its factors, and ``M[nodes, :]``'s structure with each
-    entry's place in ``M``'s data (finding the nodes and taking the rows by scipy's indexing
-    took 0.5 of a step's 0.9 ms of layer on cubic splines' block at 1e4 points)."""
+    """What a :class:`BoundaryLayer` keeps while its system's excluded and weak nodes and the
+    layer's rows of the matrix's structure stay: its nodes, ``M[nodes, :]``'s structure with
+    each entry's place in ``M``'s data, and the ordering and structure of the block's factors,
+    analysed on the block alone (in the layer's own numbering, ``block_source`` its entries'
+    places in ``M``'s data).  Finding the nodes and taking the rows by scipy's indexing took
+    0.5 of a step's 0.9 ms of layer on cubic splines' block at 1e4 points."""
 
     empty: np.ndarray  # the excluded or weak nodes it was made for
     excluded: np.ndarray
@@ -74,10 +76,26 @@ class LayerLayout:
     rows_indptr: np.ndarray
     rows_indices: np.ndarray
     rows_source: np.ndarray
+    block_source: np.ndarray
+    #: the matrix's node eliminated ``j``-th (``nodes[symbolic.order]``): the solves read and
+    #: write the system's arrays in place of the layer's own
+    order: np.ndarray
+    #: the index arrays it was made from: the mass pattern's are the same arrays every step,
+    #: never changed in place (:meth:`.system._System.build`), so meeting them again settles it
+    structure: tuple
 
     def fits(self, matrix, excluded: np.ndarray, empty: np.ndarray) -> bool:
-        return (np.array_equal(empty, self.empty) and np.array_equal(excluded, self.excluded)
-                and self.symbolic.describes(matrix, self.symbolic.excluded))
+        """Whether it is this system's layer: the same excluded and weak nodes, and the layer's
+        rows stored where and as they were (so that both gathers still read them)."""
+        nodes, stored = self.nodes, len(self.rows_indptr) - 1
+        if not (np.array_equal(empty, self.empty) and np.array_equal(excluded, self.excluded)):
+            return False
+        if matrix.indptr is self.structure[0] and matrix.indices is self.structure[1]:
+            return True
+        return (len(matrix.indptr) == len(excluded) + 1 and stored == len(nodes)
+                and np.array_equal(matrix.indptr[nodes + 1] - matrix.indptr[nodes], np.diff(self.rows_indptr))
+                and np.array_equal(matrix.indptr[nodes], self.rows_source[self.rows_indptr[:-1]])
+                and np.array_equal(matrix.indices[self.rows_source], self.rows_indices))
 
     @classmethod
     def of(cls, matrix, excluded: np.ndarray, empty: np.ndarray, lattice_shape: tuple) -> "LayerLayout | None":
@@ -87,19 +105,27 @@ class LayerLayout:
         nodes = np.flatnonzero(_near_empty_nodes(lattice, empty, LAYER_WIDTH) & ~excluded)
         if nodes.size == 0 or nodes.size > LAYER_LIMIT * np.count_nonzero(~excluded):
             return None
-        outside = np.ones(len(excluded), dtype=bool)
-        outside[nodes] = False
-        diagonal = matrix.upper_start if isinstance(matrix, _CompiledCSR) else None
-        if diagonal is None:  # (a CSR matrix with every diagonal stored: the scipy path's systems)
-            diagonal = _diagonal_index(matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64))
-        symbolic = SymbolicLDL.analyse(matrix.indptr, matrix.indices, diagonal, outside)
         starts, stops = matrix.indptr[nodes].astype(np.int64), matrix.indptr[nodes + 1].astype(np.int64)
         rows_indptr = np.zeros(len(nodes) + 1, dtype=np.int64)
         np.cumsum(stops - starts, out=rows_indptr[1:])
         source = np.repeat(starts - rows_indptr[:-1], stops - starts) + np.arange(rows_indptr[-1])
-        # the matrix's own index types: the products compile once for both
+        columns = np.asarray(matrix.indices)[source].astype(np.int64)
+        # the block in the layer's numbering: its analysis and factors read the layer's entries
+        # only (on the whole matrix's structure an analysis cost 13 ms at 1e5 points)
+        local = np.full(len(excluded), -1, dtype=np.int64)
+        local[nodes] = np.arange(len(nodes))
+        inside = local[columns] >= 0
+        block_indptr = np.zeros(len(nodes) + 1, dtype=np.int64)
+        np.cumsum(np.add.reduceat(inside.astype(np.int64), rows_indptr[:-1]), out=block_indptr[1:])  # (no row is empty)
+        block_indices = local[columns[inside]]
+        diagonal = _diagonal_index(block_indptr, block_indices)
+        if np.any(diagonal < 0):  # (every active node stores its diagonal; a block without one is not factored)
+            return None
+        symbolic = SymbolicLDL.analyse(block_indptr, block_indices, diagonal, np.zeros(len(nodes), dtype=bool))
+        # the matrix's own index types for the rows: the products compile once for both
         return cls(empty.copy(), excluded.copy(), nodes, symbolic, rows_indptr.astype(matrix.indptr.dtype),
-                   np.asarray(matrix.indices)[source], source)
+                   columns.astype(matrix.indices.dtype), source, source[inside], nodes[symbolic.order],
+                   (matrix.indptr, matrix.indices))
 
 
 @dataclass
@@ -113,7 +139,8 @@ class BoundaryLayer:
     (cubic splines, 1e5 points).  The layer of nodes within
     :data:`LAYER_WIDTH` of such nodes gets an exact solve with its block
     ``M_LL`` (the compiled ``L D L^T`` of :mod:`.ldl`, factored every step on the
-    layer's layout, which is analysed again only when the layer's nodes change), in a symmetric
+    layer's :class:`LayerLayout`, analysed again when the excluded or weak nodes or the
+    layer's rows of the matrix's structure change), in a symmetric
     multiplicative Schwarz sweep, layer - tensor - layer::
 
         z  = R^T M_LL^-1 R r
@@ -134,9 +161,10 @@ class BoundaryLayer:
     the iterations it saves (a body 4 cells thick, 86% in the layer: 109
     against 89 ms per step).  Cubic splines, 1e5 points: 5 + 14 -> 1 + 4
     iterations per step (velocity + acceleration).  The layer's block is a
-    band a few nodes wide along the edges, whose factor fills little: its
-    ``L D L^T`` took 0.4 ms a step on the block of 1e4 points where
-    SuperLU's factorization, with the check of its pivots, took 2.4 ms.
+    band a few nodes wide along the edges, whose factor fills little (21
+    entries of ``L`` a node): on the block of 1e4 points its ``L D L^T`` on a
+    kept layout took 0.2 ms a step where SuperLU's factorization with the
+    check of its pivots, and scipy's extraction of the block, took 2.4 ms.
 
     Attributes
     ----------
@@ -168,7 +196,7 @@ class BoundaryLayer:
             LayerLayout.of(matrix, excluded, empty, lattice_shape)
         if layout is None:
             return None
-        factors, _ = layout.symbolic.factor(matrix.data)
+        factors, _ = layout.symbolic.factor(matrix.data[layout.block_source])
         if factors is None:
             return None
         rows = _CompiledCSR((matrix.data[layout.rows_source], layout.rows_indices, layout.rows_indptr),
@@ -178,12 +206,21 @@ class BoundaryLayer:
     def sweep(self, r: np.ndarray, tensor_solve) -> np.ndarray:
         """``z = P^-1 r`` for r of shape (n_nodes, k); ``tensor_solve(v)`` is ``T^-1 v``."""
         nodes, rows = self.nodes, self.rows
-        z = self.factors.solve(r)  # zero outside the layer
+        z = self._solve(r)
         z += tensor_solve(r - _transpose_times_dense(rows.indptr, rows.indices, rows.data, z[nodes], r.shape[0]))
         residual = np.zeros_like(r)
         residual[nodes] = r[nodes] - rows @ z
-        z += self.factors.solve(residual)
+        z += self._solve(residual)
         return z
+
+    def _solve(self, v: np.ndarray) -> np.ndarray:
+        """``R^T M_LL^-1 R v`` for v (n_nodes, k): the factors read the layer's rows of ``v`` in
+        their order and write the solution there, zero elsewhere (a gather and a scatter of
+        the layer's rows in numpy took 30 us more a sweep at 1e4 points)."""
+        factors, out = self.factors, np.zeros((v.shape[0], v.shape[1]))
+        _solve(np.ascontiguousarray(v, dtype=float), out, self.layout.order, factors.symbolic.lower_indptr,
+               factors.lower_rows, factors.lower_data, factors.pivots)
+        return out
 
 
 def tensor_preconditioner(grid) -> TensorPreconditioner | None:
