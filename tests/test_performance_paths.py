@@ -136,7 +136,7 @@ def test_boundary_layer_keeps_its_layout_while_its_nodes_stay():
     mass = simulation.mass
     mass.linear_solver = "cg"
     simulation.advance()
-    first = mass._layer_layouts[(0, 1)]
+    first = mass._layer_layouts[((0, 1), False)]
     simulation.advance()
     system = mass._systems[0]
     layer = system.boundary_layer(mass.preconditioner.lattice_shape, mass._weak, mass._layer_layouts)
@@ -173,12 +173,31 @@ def test_boundary_layer_on_both_engines():
         for step in range(6):
             simulation.advance()
             if step == 3:
-                layout = simulation.mass._layer_layouts[(0, 1)]
-        assert simulation.mass._layer_layouts[(0, 1)] is layout
+                layout = simulation.mass._layer_layouts[((0, 1), False)]
+        assert simulation.mass._layer_layouts[((0, 1), False)] is layout
         runs[engine] = simulation
     assert runs["numba"].mass.iterations == runs["scipy"].mass.iterations
     v = runs["numba"].particles.v
     assert np.abs(runs["scipy"].particles.v - v).max() <= 1e-12 * np.abs(v).max()
+
+
+def test_a_blended_system_keeps_its_layer_layouts(monkeypatch):
+    """Cubic splines' block with one point per cell, whose consistent mass is singular at every
+    step and blended: the layouts of the singular system's layer and of the blended one's are
+    analysed at the first step and kept apart, none in the four steps after it."""
+    from femgrid_mpm.mass.preconditioners import LayerLayout
+
+    made = []
+    analyse = LayerLayout.of.__func__
+    monkeypatch.setattr(LayerLayout, "of", classmethod(lambda cls, *a: made.append(1) or analyse(cls, *a)))
+    simulation = Simulation(block_scene("bspline3", "consistent", 2500).with_overrides(**{
+        "solver.linear_solver": "cg", "bodies.0.points_per_cell": 1}))
+    simulation.advance()
+    first = len(made)
+    for _ in range(4):
+        simulation.advance()
+    assert simulation.mass.blended_steps == 5 and first == 2 and len(made) == first
+    assert set(simulation.mass._layer_layouts) == {((0, 1), False), ((0, 1), True)}
 
 
 def test_no_boundary_layer_for_a_thin_body():

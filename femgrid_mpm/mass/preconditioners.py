@@ -128,6 +128,14 @@ class LayerLayout:
                    (matrix.indptr, matrix.indices))
 
 
+def layout_of(matrix, excluded: np.ndarray, weak: np.ndarray, lattice_shape: tuple,
+              last: LayerLayout | None = None) -> LayerLayout | None:
+    """A system's :class:`LayerLayout`: ``last`` where it fits, else made afresh."""
+    empty = excluded | weak
+    return last if last is not None and last.fits(matrix, excluded, empty) else \
+        LayerLayout.of(matrix, excluded, empty, lattice_shape)
+
+
 @dataclass
 class BoundaryLayer:
     """Completes :class:`TensorPreconditioner` where a body's edge makes ``M`` unlike a tensor product.
@@ -191,9 +199,12 @@ class BoundaryLayer:
         below :data:`.direct.PIVOT_RATIO` of its diagonal entry: CG then meets
         the singularity and reports it, as without a layer).  ``last``: an
         earlier layer's layout, taken again if it fits this one."""
-        empty = excluded | weak
-        layout = last if last is not None and last.fits(matrix, excluded, empty) else \
-            LayerLayout.of(matrix, excluded, empty, lattice_shape)
+        return cls.on(layout_of(matrix, excluded, weak, lattice_shape, last), matrix)
+
+    @classmethod
+    def on(cls, layout: LayerLayout | None, matrix: sp.csr_matrix) -> "BoundaryLayer | None":
+        """The layer on a layout (:func:`layout_of`) for this step's matrix; None without a
+        layout, or where the block is singular."""
         if layout is None:
             return None
         factors, _ = layout.symbolic.factor(matrix.data[layout.block_source])

@@ -12,7 +12,7 @@ import scipy.sparse as sp
 from .direct import _factor, _smallest_pivot_node
 from .ldl import NumericLDL, SymbolicLDL
 from .exclusion import _exclude_in_place
-from .preconditioners import BoundaryLayer
+from .preconditioners import BoundaryLayer, layout_of
 from .reused import ReusedFactors
 from .sparse import _CompiledCSR
 
@@ -48,11 +48,14 @@ class _System:
         caller over the steps, holds each system's last layer layout
         (:class:`.preconditioners.LayerLayout`), taken again where it fits."""
         if self._layer is False:
-            columns = tuple(self.columns)
-            last = None if layouts is None else layouts.get(columns)
-            self._layer = BoundaryLayer.build(self.matrix, self.excluded, weak, lattice_shape, last)
-            if layouts is not None and self._layer is not None:
-                layouts[columns] = self._layer.layout
+            # a blended system's matrix is another: its layout is kept apart, and a layout whose
+            # block is singular too (the next step's may not be)
+            key = (tuple(self.columns), self.blended)
+            layout = layout_of(self.matrix, self.excluded, weak, lattice_shape,
+                               None if layouts is None else layouts.get(key))
+            if layouts is not None and layout is not None:
+                layouts[key] = layout
+            self._layer = BoundaryLayer.on(layout, self.matrix)
         return self._layer
 
     @classmethod
