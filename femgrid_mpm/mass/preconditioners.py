@@ -3,6 +3,7 @@ completed by an exact solve in a layer along the bodies' edges."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -11,7 +12,7 @@ import scipy.sparse as sp
 
 from ..kernels.arithmetic import fused
 from ..kernels.compiled import compiled
-from .ldl import NumericLDL, SymbolicLDL, _diagonal_index, _solve
+from .ldl import NumericLDL, SymbolicLDL, _diagonal_index
 from .sparse import _CompiledCSR, _transpose_times_dense
 
 if TYPE_CHECKING:  # system.py imports this module
@@ -78,30 +79,28 @@ class LayerLayout:
     rows_indices: np.ndarray
     rows_source: np.ndarray
     block_source: np.ndarray
-    #: the matrix's node eliminated ``j``-th (``nodes[symbolic.order]``): the solves read and
-    #: write the system's arrays in place of the layer's own
-    order: np.ndarray
-    #: the index arrays it was made from: the mass pattern's are the same arrays every step,
-    #: never changed in place (:meth:`.system._System.build`), so meeting them again settles it
+    #: the index arrays it was made from: the one system made in place from the mass pattern
+    #: holds the same arrays every step, never changed in place (:meth:`.system._System.build`),
+    #: so meeting them again settles it (other systems' are compared by value)
     structure: tuple
 
     def fits(self, matrix, excluded: np.ndarray, empty: np.ndarray) -> bool:
         """Whether it is this system's layer: the same excluded and weak nodes, and the layer's
         rows stored where and as they were (so that both gathers still read them)."""
-        nodes, stored = self.nodes, len(self.rows_indptr) - 1
+        nodes = self.nodes
         if not (np.array_equal(empty, self.empty) and np.array_equal(excluded, self.excluded)):
             return False
         if matrix.indptr is self.structure[0] and matrix.indices is self.structure[1]:
             return True
-        return (len(matrix.indptr) == len(excluded) + 1 and stored == len(nodes)
+        return (len(matrix.indptr) == len(excluded) + 1
                 and np.array_equal(matrix.indptr[nodes + 1] - matrix.indptr[nodes], np.diff(self.rows_indptr))
                 and np.array_equal(matrix.indptr[nodes], self.rows_source[self.rows_indptr[:-1]])
                 and np.array_equal(matrix.indices[self.rows_source], self.rows_indices))
 
     @classmethod
     def of(cls, matrix, excluded: np.ndarray, empty: np.ndarray, lattice_shape: tuple) -> "LayerLayout | None":
-        """The layout of a system's layer, None if it is empty or holds more than
-        :data:`LAYER_LIMIT` of the kept nodes."""
+        """The layout of a system's layer, None if it is empty, holds more than
+        :data:`LAYER_LIMIT` of the kept nodes, or a row of its block stores no diagonal entry."""
         lattice = np.column_stack(np.unravel_index(np.arange(len(excluded)), lattice_shape))
         nodes = np.flatnonzero(_near_empty_nodes(lattice, empty, LAYER_WIDTH) & ~excluded)
         if nodes.size == 0 or nodes.size > LAYER_LIMIT * np.count_nonzero(~excluded):
@@ -116,17 +115,18 @@ class LayerLayout:
         local = np.full(len(excluded), -1, dtype=np.int64)
         local[nodes] = np.arange(len(nodes))
         inside = local[columns] >= 0
-        block_indptr = np.zeros(len(nodes) + 1, dtype=np.int64)
-        np.cumsum(np.add.reduceat(inside.astype(np.int64), rows_indptr[:-1]), out=block_indptr[1:])  # (no row is empty)
+        block_indptr = np.concatenate(([0], np.cumsum(inside)))[rows_indptr]
         block_indices = local[columns[inside]]
         diagonal = _diagonal_index(block_indptr, block_indices)
         if np.any(diagonal < 0):  # (every active node stores its diagonal; a block without one is not factored)
             return None
         symbolic = SymbolicLDL.analyse(block_indptr, block_indices, diagonal, np.zeros(len(nodes), dtype=bool))
+        # eliminated in the layer's numbering, read and written in the system's: the solves and the
+        # weakest pivot's node are the system's
+        symbolic = dataclasses.replace(symbolic, order=nodes[symbolic.order])
         # the matrix's own index types for the rows: the products compile once for both
         return cls(empty.copy(), excluded.copy(), nodes, symbolic, rows_indptr.astype(matrix.indptr.dtype),
-                   columns.astype(matrix.indices.dtype), source, source[inside], nodes[symbolic.order],
-                   (matrix.indptr, matrix.indices))
+                   columns.astype(matrix.indices.dtype), source, source[inside], (matrix.indptr, matrix.indices))
 
 
 def layout_of(matrix, excluded: np.ndarray, weak: np.ndarray, lattice_shape: tuple,
@@ -179,8 +179,8 @@ class BoundaryLayer:
     ----------
     nodes : ndarray of int, shape (n_layer,)
     factors : NumericLDL
-        ``M_LL = L D L^T`` on ``layout``, the system's matrix with every node
-        outside the layer excluded; its solves read and write the layer's rows only.
+        ``M_LL = L D L^T`` on ``layout``; its solves take and give arrays of the
+        system's size, reading and writing the layer's rows only (zero elsewhere).
     rows : csr_matrix, shape (n_layer, n_nodes)
         ``M[nodes, :]``; ``M[:, nodes]`` is its transpose (``M`` symmetric),
         applied by :func:`_transpose_times_dense` (a CSR matrix of the
@@ -229,10 +229,7 @@ class BoundaryLayer:
         """``R^T M_LL^-1 R v`` for v (n_nodes, k): the factors read the layer's rows of ``v`` in
         their order and write the solution there, zero elsewhere (a gather and a scatter of
         the layer's rows in numpy took 30 us more a sweep at 1e4 points)."""
-        factors, out = self.factors, np.zeros((v.shape[0], v.shape[1]))
-        _solve(np.ascontiguousarray(v, dtype=float), out, self.layout.order, factors.symbolic.lower_indptr,
-               factors.lower_rows, factors.lower_data, factors.pivots)
-        return out
+        return self.factors.solve(v)
 
 
 def tensor_preconditioner(grid) -> TensorPreconditioner | None:
