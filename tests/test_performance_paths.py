@@ -127,9 +127,9 @@ def test_boundary_layer_keeps_its_layout_while_its_nodes_stay():
     """The layer's block is factored every step by the compiled ``L D L^T`` on a layout kept
     while the system's excluded and weak nodes and the layer's rows stay: the next step takes
     the same layout object, its solve is numpy's dense solve of ``M[nodes][:, nodes]`` to 1e-12
-    and zero outside the layer, its rows are ``M[nodes, :]`` exactly; other weak nodes,
-    or the layer's rows stored elsewhere (the same matrix without its stored zeros), make a
-    new layout, whose solve is the same."""
+    and zero outside the layer, its rows are ``M[nodes, :]`` exactly; other weak nodes, or
+    the layer's rows stored elsewhere or in another order (the same matrix without its stored
+    zeros, or with two entries of a row swapped), make a new layout, whose solve is the same."""
     from femgrid_mpm.mass.preconditioners import BoundaryLayer
 
     simulation = Simulation(block_scene("bspline3", "consistent", 2500))
@@ -159,6 +159,14 @@ def test_boundary_layer_keeps_its_layout_while_its_nodes_stay():
     moved = BoundaryLayer.build(compact, system.excluded, mass._weak, mass.preconditioner.lattice_shape, first)
     assert moved.layout is not first and np.array_equal(moved.nodes, layer.nodes)
     np.testing.assert_allclose(moved._solve(rhs)[layer.nodes], expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    swapped = matrix.copy()  # one layer row's first two entries in the other order: the same matrix
+    start = swapped.indptr[layer.nodes[0]]
+    for array in (swapped.indices, swapped.data):
+        array[start], array[start + 1] = array[start + 1], array[start]
+    assert not first.fits(swapped, system.excluded, system.excluded | mass._weak)
+    reordered = BoundaryLayer.build(swapped, system.excluded, mass._weak, mass.preconditioner.lattice_shape, first)
+    np.testing.assert_allclose(reordered._solve(rhs)[layer.nodes], expected, rtol=0,
+                               atol=1e-12 * np.abs(expected).max())
 
 
 def test_boundary_layer_on_both_engines():
