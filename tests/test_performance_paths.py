@@ -130,7 +130,7 @@ def test_boundary_layer_keeps_its_layout_while_its_nodes_stay():
     and zero outside the layer, its rows are ``M[nodes, :]`` exactly; other weak nodes, or
     the layer's rows stored elsewhere or in another order (the same matrix without its stored
     zeros, or with two entries of a row swapped), make a new layout, whose solve is the same."""
-    from femgrid_mpm.mass.preconditioners import BoundaryLayer
+    from femgrid_mpm.mass.preconditioners import BoundaryLayer, layout_of
 
     simulation = Simulation(block_scene("bspline3", "consistent", 2500))
     mass = simulation.mass
@@ -146,26 +146,30 @@ def test_boundary_layer_keeps_its_layout_while_its_nodes_stay():
     assert abs(rows - sp.csr_matrix(layer.rows)).max() == 0.0
     rhs = np.random.default_rng(1).standard_normal((matrix.shape[0], 2))
     expected = np.linalg.solve(rows[:, layer.nodes].toarray(), rhs[layer.nodes])
-    solution = layer._solve(rhs)
+    solution = layer.factors.solve(rhs)
     np.testing.assert_allclose(solution[layer.nodes], expected, rtol=0, atol=1e-12 * np.abs(expected).max())
     assert not np.delete(solution, layer.nodes, axis=0).any()
     weak = mass._weak.copy()
     weak[np.flatnonzero(~system.excluded)[len(layer.nodes) // 2]] = True
-    other = BoundaryLayer.build(system.matrix, system.excluded, weak, mass.preconditioner.lattice_shape, first)
+    def layer_of(matrix, weak):
+        return BoundaryLayer.on(layout_of(matrix, system.excluded, weak, mass.preconditioner.lattice_shape, first), matrix)
+
+    other = layer_of(system.matrix, weak)
     assert other.layout is not first
     compact = matrix.copy()
     compact.eliminate_zeros()
     assert compact.nnz < matrix.nnz
-    moved = BoundaryLayer.build(compact, system.excluded, mass._weak, mass.preconditioner.lattice_shape, first)
+    moved = layer_of(compact, mass._weak)
     assert moved.layout is not first and np.array_equal(moved.nodes, layer.nodes)
-    np.testing.assert_allclose(moved._solve(rhs)[layer.nodes], expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    np.testing.assert_allclose(moved.factors.solve(rhs)[layer.nodes], expected, rtol=0,
+                               atol=1e-12 * np.abs(expected).max())
     swapped = matrix.copy()  # one layer row's first two entries in the other order: the same matrix
     start = swapped.indptr[layer.nodes[0]]
     for array in (swapped.indices, swapped.data):
         array[start], array[start + 1] = array[start + 1], array[start]
     assert not first.fits(swapped, system.excluded, system.excluded | mass._weak)
-    reordered = BoundaryLayer.build(swapped, system.excluded, mass._weak, mass.preconditioner.lattice_shape, first)
-    np.testing.assert_allclose(reordered._solve(rhs)[layer.nodes], expected, rtol=0,
+    reordered = layer_of(swapped, mass._weak)
+    np.testing.assert_allclose(reordered.factors.solve(rhs)[layer.nodes], expected, rtol=0,
                                atol=1e-12 * np.abs(expected).max())
 
 

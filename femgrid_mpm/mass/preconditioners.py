@@ -92,8 +92,7 @@ class LayerLayout:
             return False
         if matrix.indptr is self.structure[0] and matrix.indices is self.structure[1]:
             return True
-        return (len(matrix.indptr) == len(excluded) + 1
-                and np.array_equal(matrix.indptr[nodes + 1] - matrix.indptr[nodes], np.diff(self.rows_indptr))
+        return (np.array_equal(matrix.indptr[nodes + 1] - matrix.indptr[nodes], np.diff(self.rows_indptr))
                 and np.array_equal(matrix.indptr[nodes], self.rows_source[self.rows_indptr[:-1]])
                 and np.array_equal(matrix.indices[self.rows_source], self.rows_indices))
 
@@ -193,19 +192,11 @@ class BoundaryLayer:
     layout: LayerLayout
 
     @classmethod
-    def build(cls, matrix: sp.csr_matrix, excluded: np.ndarray, weak: np.ndarray,
-              lattice_shape: tuple, last: LayerLayout | None = None) -> "BoundaryLayer | None":
-        """The layer of a system, or None if it is empty, holds more than
-        :data:`LAYER_LIMIT` of the kept nodes, or its block is singular (a pivot
-        below :data:`.direct.PIVOT_RATIO` of its diagonal entry: CG then meets
-        the singularity and reports it, as without a layer).  ``last``: an
-        earlier layer's layout, taken again if it fits this one."""
-        return cls.on(layout_of(matrix, excluded, weak, lattice_shape, last), matrix)
-
-    @classmethod
     def on(cls, layout: LayerLayout | None, matrix: sp.csr_matrix) -> "BoundaryLayer | None":
         """The layer on a layout (:func:`layout_of`) for this step's matrix; None without a
-        layout, or where the block is singular."""
+        layout (no layer, or more than :data:`LAYER_LIMIT` of the kept nodes), or where the block
+        is singular (a pivot below :data:`.direct.PIVOT_RATIO` of its diagonal entry: CG then
+        meets the singularity and reports it, as without a layer)."""
         if layout is None:
             return None
         factors, _ = layout.symbolic.factor(matrix.data[layout.block_source])
@@ -218,18 +209,12 @@ class BoundaryLayer:
     def sweep(self, r: np.ndarray, tensor_solve) -> np.ndarray:
         """``z = P^-1 r`` for r of shape (n_nodes, k); ``tensor_solve(v)`` is ``T^-1 v``."""
         nodes, rows = self.nodes, self.rows
-        z = self._solve(r)
+        z = self.factors.solve(r)  # the layer's rows of r in, the layer's rows out, zero elsewhere
         z += tensor_solve(r - _transpose_times_dense(rows.indptr, rows.indices, rows.data, z[nodes], r.shape[0]))
         residual = np.zeros_like(r)
         residual[nodes] = r[nodes] - rows @ z
-        z += self._solve(residual)
+        z += self.factors.solve(residual)
         return z
-
-    def _solve(self, v: np.ndarray) -> np.ndarray:
-        """``R^T M_LL^-1 R v`` for v (n_nodes, k): the factors read the layer's rows of ``v`` in
-        their order and write the solution there, zero elsewhere (a gather and a scatter of
-        the layer's rows in numpy took 30 us more a sweep at 1e4 points)."""
-        return self.factors.solve(v)
 
 
 def tensor_preconditioner(grid) -> TensorPreconditioner | None:
