@@ -1,6 +1,7 @@
 """The performance paths compute what the plain ones do: the tensor preconditioner,
 the fixed mass pattern, the compiled CSR product and the benchmark's scene."""
 
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -109,7 +110,7 @@ def test_boundary_layer_is_symmetric_positive_definite_and_cuts_iterations():
     kept = ~system.excluded
     assert layer is not None and 0 < layer.nodes.size < kept.sum()
     identity = np.eye(simulation.grid.n_nodes)
-    P = layer.sweep(identity, lambda v: _apply_tensor(np.ascontiguousarray(v), np.empty_like(v), *tensor))
+    P = layer.sweep(identity, tensor)
     np.testing.assert_allclose(P, P.T, rtol=0, atol=1e-10 * np.abs(P).max())
     assert np.linalg.eigvalsh(0.5 * (P + P.T)).min() > 0
     rhs = np.where(system.excluded[:, None], 0.0, simulation.context.force)
@@ -121,6 +122,35 @@ def test_boundary_layer_is_symmetric_positive_definite_and_cuts_iterations():
         assert converged
         np.testing.assert_allclose(solution, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
     assert 0 < 2 * layered[2] < alone[2]
+
+
+def test_compiled_layered_cg_is_the_python_loop():
+    """CG with a :class:`BoundaryLayer` on the compiled matrix runs compiled; the Python loop
+    (the scipy engine's, reached here through a layer that is not a ``BoundaryLayer``) makes
+    the same iterates bit for bit: converged, stopped at the iteration limit, and stopped at
+    ``r.z < 0`` (the layer's pivots negated: ``converged`` None)."""
+    simulation = Simulation(block_scene("bspline3", "consistent", 2500))
+    mass = simulation.mass
+    mass.linear_solver = "cg"
+    simulation.advance()
+    system = mass._systems[0]
+    tensor = mass.preconditioner.scaled(system)
+    layer = system.boundary_layer(mass.preconditioner.lattice_shape, mass._weak)
+    negative = dataclasses.replace(layer, factors=dataclasses.replace(layer.factors, pivots=-layer.factors.pivots))
+    rhs = np.where(system.excluded[:, None], 0.0, simulation.context.force)
+
+    class InPython:
+        def __init__(self, layer):
+            self.sweep = layer.sweep
+
+    outcomes = []
+    for chosen, limit in ((layer, 1000), (layer, 3), (negative, 1000)):
+        compiled_run, python_run = (
+            _preconditioned_cg(system.matrix, rhs, np.zeros_like(rhs), system.inverse_diagonal, 1e-12, limit,
+                               tensor, how) for how in (chosen, InPython(chosen)))
+        assert np.array_equal(compiled_run[0], python_run[0]) and compiled_run[1:] == python_run[1:]
+        outcomes.append(compiled_run[1:])
+    assert outcomes[0][0] is True and outcomes[1] == (False, 3) and outcomes[2][0] is None
 
 
 def test_boundary_layer_keeps_its_layout_while_its_nodes_stay():
@@ -245,8 +275,8 @@ def test_a_layer_that_is_not_positive_definite_falls_back_to_the_tensor_precondi
     from femgrid_mpm.mass.system import _System
 
     class Negative:
-        def sweep(self, r, tensor_solve):
-            return -tensor_solve(r)
+        def sweep(self, r, tensor):
+            return -_apply_tensor(np.ascontiguousarray(r), np.empty_like(r), *tensor)
 
     simulation = Simulation(block_scene("bspline3", "consistent", 400))
     mass = simulation.mass

@@ -8,7 +8,7 @@ import numpy as np
 from ..kernels.arithmetic import fused
 from ..kernels.compiled import compiled
 from .gauss_seidel import gauss_seidel_cg, sweeps_apply
-from .preconditioners import _apply_tensor
+from .preconditioners import BoundaryLayer, _apply_tensor, _layer_sweep
 from .sparse import _CompiledCSR, _product_dot
 
 
@@ -29,18 +29,22 @@ def _preconditioned_cg(A, b, x0, inverse_diagonal, rtol, max_iterations, tensor=
     """
     if tensor is None and layer is None and sweeps_apply(A):
         return gauss_seidel_cg(A, b, x0, rtol, max_iterations, inverse_diagonal)
+    if isinstance(A, _CompiledCSR) and isinstance(layer, BoundaryLayer):
+        x, state, iterations = _layered_cg(A.indptr, A.indices, A.data, A.upper_start_or_none(),
+                                           np.ascontiguousarray(b, dtype=float), np.ascontiguousarray(x0, dtype=float),
+                                           rtol, max_iterations, *layer.arguments(), *tensor)
+        return x, (None if state < 0 else bool(state)), iterations
     if isinstance(A, _CompiledCSR) and layer is None:
         return _compiled_cg(A.indptr, A.indices, A.data, A.upper_start_or_none(), np.ascontiguousarray(b, dtype=float),
                             np.ascontiguousarray(x0, dtype=float), inverse_diagonal, rtol, max_iterations,
                             *(_NO_TENSOR if tensor is None else (True, *tensor)))
 
-    def tensor_solve(r):
-        return _apply_tensor(np.ascontiguousarray(r), np.empty_like(r), *tensor)
-
     def precondition(r):
         if tensor is None:
             return inverse_diagonal[:, None] * r
-        return tensor_solve(r) if layer is None else layer.sweep(r, tensor_solve)
+        if layer is None:
+            return _apply_tensor(np.ascontiguousarray(r), np.empty_like(r), *tensor)
+        return layer.sweep(r, tensor)
 
     # the vector updates in compiled passes (numpy's temporaries took as long as the products)
     b = np.ascontiguousarray(b, dtype=float)
@@ -161,6 +165,63 @@ def _compiled_cg(indptr, indices, data, upper_start, b, x0, inverse_diagonal, rt
             for c in range(k):
                 p[i, c] = fused(beta[c], p[i, c], z[i, c])
     return x, False, max_iterations
+
+
+@compiled()
+def _layered_cg(indptr, indices, data, upper_start, b, x0, rtol, max_iterations, nodes, rows_indptr, rows_indices,
+                rows_data, order, lower_indptr, lower_rows, lower_data, pivots, scale, excluded, factor_x, factor_y):
+    """:func:`_preconditioned_cg`'s loop with a :class:`.BoundaryLayer`, compiled: the same
+    compiled passes in the same order, so bit for bit the loop the scipy engine runs (from
+    Python, whose calls and tests took ~0.6 of cubic splines' 5 ms step at 1e4 points).
+    ``converged`` as 1, 0 or -1 (None)."""
+    n, k = b.shape
+    target = np.zeros(k)
+    for i in range(n):  # numpy's norm along the rows: the same sequential sums (not fused)
+        for c in range(k):
+            target[c] += b[i, c] * b[i, c]
+    target = rtol * np.sqrt(target)
+    x = x0.copy()
+    product = np.empty((n, k))
+    _product_dot(indptr, indices, data, upper_start, x, product, np.zeros(k))
+    r = b - product
+    residual = _column_dots(r, r)
+    if np.all(np.sqrt(residual) <= target):  # the first guess is the solution: no preconditioning
+        return x, 1, 0
+    z = _layer_sweep(r, nodes, rows_indptr, rows_indices, rows_data, order, lower_indptr, lower_rows, lower_data,
+                     pivots, scale, excluded, factor_x, factor_y)
+    p = z.copy()
+    rz = _column_dots(r, z)
+    if np.any(rz < 0):
+        return x, -1, 0
+    Ap = np.empty((n, k))
+    curvature = np.zeros(k)
+    alpha = np.zeros(k)
+    beta = np.zeros(k)
+    for iteration in range(max_iterations + 1):
+        if not np.any(rz != 0):
+            return x, 1, iteration
+        if iteration == max_iterations:
+            break
+        curvature[:] = 0.0
+        _product_dot(indptr, indices, data, upper_start, p, Ap, curvature)
+        for c in range(k):
+            if curvature[c] <= 0.0 and rz[c] != 0.0:
+                return x, 0, iteration
+        for c in range(k):
+            alpha[c] = rz[c] / curvature[c] if curvature[c] > 0.0 else 0.0
+        _cg_advance(x, r, p, Ap, alpha, residual)
+        if np.all(np.sqrt(residual) <= target):  # converged: the preconditioner's sweep would go unused
+            return x, 1, iteration + 1
+        z = _layer_sweep(r, nodes, rows_indptr, rows_indices, rows_data, order, lower_indptr, lower_rows,
+                         lower_data, pivots, scale, excluded, factor_x, factor_y)
+        rz_new = _column_dots(r, z)
+        if np.any(rz_new < 0):
+            return x, -1, iteration + 1
+        for c in range(k):
+            beta[c] = rz_new[c] / rz[c] if rz[c] != 0.0 else 0.0
+        _cg_direction(p, z, beta)
+        rz = rz_new
+    return x, 0, max_iterations
 
 
 @compiled(inline="always")

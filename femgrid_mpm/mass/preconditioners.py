@@ -12,8 +12,8 @@ import scipy.sparse as sp
 
 from ..kernels.arithmetic import fused
 from ..kernels.compiled import compiled
-from .ldl import NumericLDL, SymbolicLDL, _diagonal_index
-from .sparse import _CompiledCSR, _transpose_times_dense
+from .ldl import NumericLDL, SymbolicLDL, _diagonal_index, _solve
+from .sparse import _product_dot, _transpose_times_dense
 
 if TYPE_CHECKING:  # system.py imports this module
     from .system import _System
@@ -180,16 +180,24 @@ class BoundaryLayer:
     factors : NumericLDL
         ``M_LL = L D L^T`` on ``layout``; its solves take and give arrays of the
         system's size, reading and writing the layer's rows only (zero elsewhere).
-    rows : csr_matrix, shape (n_layer, n_nodes)
-        ``M[nodes, :]``; ``M[:, nodes]`` is its transpose (``M`` symmetric),
-        applied by :func:`_transpose_times_dense` (a CSR matrix of the
-        transpose loops over every node's row: 0.25 against 0.09 ms).
+    rows_data : ndarray, shape (entries,)
+        The entries of ``M[nodes, :]`` on the layout's rows (:attr:`rows`).
     """
 
     nodes: np.ndarray
     factors: NumericLDL
-    rows: sp.csr_matrix
+    rows_data: np.ndarray
     layout: LayerLayout
+
+    @property
+    def rows(self) -> sp.csr_matrix:
+        """``M[nodes, :]``, shape (n_layer, n_nodes); ``M[:, nodes]`` is its transpose (``M``
+        symmetric), applied by :func:`_transpose_times_dense` (a CSR matrix of the transpose
+        loops over every node's row: 0.25 against 0.09 ms).  The sweep reads its arrays
+        only (making the scipy matrix every step took 80 us at 1e4 points)."""
+        layout = self.layout
+        return sp.csr_matrix((self.rows_data, layout.rows_indices, layout.rows_indptr),
+                             shape=(len(self.nodes), len(layout.empty)))
 
     @classmethod
     def on(cls, layout: LayerLayout | None, matrix: sp.csr_matrix) -> "BoundaryLayer | None":
@@ -202,19 +210,56 @@ class BoundaryLayer:
         factors, _ = layout.symbolic.factor(matrix.data[layout.block_source])
         if factors is None:
             return None
-        rows = _CompiledCSR((matrix.data[layout.rows_source], layout.rows_indices, layout.rows_indptr),
-                            shape=(len(layout.nodes), matrix.shape[1]), copy=False)
-        return cls(layout.nodes, factors, rows, layout)
+        return cls(layout.nodes, factors, matrix.data[layout.rows_source], layout)
 
-    def sweep(self, r: np.ndarray, tensor_solve) -> np.ndarray:
-        """``z = P^-1 r`` for r of shape (n_nodes, k); ``tensor_solve(v)`` is ``T^-1 v``."""
-        nodes, rows = self.nodes, self.rows
-        z = self.factors.solve(r)  # the layer's rows of r in, the layer's rows out, zero elsewhere
-        z += tensor_solve(r - _transpose_times_dense(rows.indptr, rows.indices, rows.data, z[nodes], r.shape[0]))
-        residual = np.zeros_like(r)
-        residual[nodes] = r[nodes] - rows @ z
-        z += self.factors.solve(residual)
-        return z
+    def arguments(self) -> tuple:
+        """The layer's arrays, as :func:`_layer_sweep` takes them after ``r``."""
+        factors, layout = self.factors, self.layout
+        return (self.nodes, layout.rows_indptr, layout.rows_indices, self.rows_data, factors.symbolic.order,
+                factors.symbolic.lower_indptr, factors.lower_rows, factors.lower_data, factors.pivots)
+
+    def sweep(self, r: np.ndarray, tensor: tuple) -> np.ndarray:
+        """``z = P^-1 r`` for r of shape (n_nodes, k); ``tensor``: the arguments of
+        :func:`_apply_tensor` after its two arrays (:meth:`TensorPreconditioner.scaled`)."""
+        return _layer_sweep(np.ascontiguousarray(r, dtype=float), *self.arguments(), *tensor)
+
+
+@compiled()
+def _layer_sweep(r, nodes, rows_indptr, rows_indices, rows_data, order, lower_indptr, lower_rows, lower_data,
+                 pivots, scale, excluded, factor_x, factor_y):
+    """:meth:`BoundaryLayer.sweep`: layer - tensor - layer, in one compiled call (CG's loop
+    calls it every iteration, and from Python its seven steps' calls and temporaries took
+    as long as its triangular solves)."""
+    n, k = r.shape
+    n_layer = len(nodes)
+    z = np.zeros((n, k))
+    _solve(r, z, order, lower_indptr, lower_rows, lower_data, pivots)  # the layer's rows of r in and out
+    on_layer = np.empty((n_layer, k))
+    for i in range(n_layer):
+        for c in range(k):
+            on_layer[i, c] = z[nodes[i], c]
+    # M z from the layer's rows alone: z lives on the layer, and M[:, nodes] = M[nodes, :]^T
+    rest = _transpose_times_dense(rows_indptr, rows_indices, rows_data, on_layer, n)
+    for i in range(n):
+        for c in range(k):
+            rest[i, c] = r[i, c] - rest[i, c]
+    tensor = np.empty((n, k))
+    _apply_tensor(rest, tensor, scale, excluded, factor_x, factor_y)
+    for i in range(n):
+        for c in range(k):
+            z[i, c] = z[i, c] + tensor[i, c]
+    layer_rows = np.empty((n_layer, k))
+    _product_dot(rows_indptr, rows_indices, rows_data, np.zeros(0, dtype=np.int64), z, layer_rows, np.zeros(k))
+    residual = np.zeros((n, k))
+    for i in range(n_layer):
+        for c in range(k):
+            residual[nodes[i], c] = r[nodes[i], c] - layer_rows[i, c]
+    correction = np.zeros((n, k))
+    _solve(residual, correction, order, lower_indptr, lower_rows, lower_data, pivots)
+    for i in range(n):
+        for c in range(k):
+            z[i, c] = z[i, c] + correction[i, c]
+    return z
 
 
 def tensor_preconditioner(grid) -> TensorPreconditioner | None:
