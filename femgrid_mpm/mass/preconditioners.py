@@ -13,7 +13,7 @@ import scipy.sparse as sp
 from ..kernels.arithmetic import fused
 from ..kernels.compiled import compiled
 from .ldl import NumericLDL, SymbolicLDL, _diagonal_index, _solve
-from .sparse import _product_dot, _transpose_times_dense
+from .sparse import _csr_times_dense_dot, _transpose_times_dense
 
 if TYPE_CHECKING:  # system.py imports this module
     from .system import _System
@@ -249,7 +249,7 @@ def _layer_sweep(r, nodes, rows_indptr, rows_indices, rows_data, order, lower_in
         for c in range(k):
             z[i, c] = z[i, c] + tensor[i, c]
     layer_rows = np.empty((n_layer, k))
-    _product_dot(rows_indptr, rows_indices, rows_data, np.zeros(0, dtype=np.int64), z, layer_rows, np.zeros(k))
+    _csr_times_dense_dot(rows_indptr, rows_indices, rows_data, z, layer_rows, np.zeros(k))
     residual = np.zeros((n, k))
     for i in range(n_layer):
         for c in range(k):
