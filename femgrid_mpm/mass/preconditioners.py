@@ -4,6 +4,7 @@ completed by an exact solve in a layer along the bodies' edges."""
 from __future__ import annotations
 
 import dataclasses
+import weakref
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -79,9 +80,11 @@ class LayerLayout:
     rows_indices: np.ndarray
     rows_source: np.ndarray
     block_source: np.ndarray
-    #: the index arrays it was made from: the one system made in place from the mass pattern
-    #: holds the same arrays every step, never changed in place (:meth:`.system._System.build`),
-    #: so meeting them again settles it (other systems' are compared by value)
+    #: weak references to the index arrays it was made from: the one system made in place from
+    #: the mass pattern holds the same arrays every step, never changed in place
+    #: (:meth:`.system._System.build`), so meeting them again settles it; other systems' (new
+    #: every step on the scipy engine, or blended) are compared by value, and are not kept alive
+    #: by the layout (at 1e5 points ~5 MB a layout)
     structure: tuple
 
     def fits(self, matrix, excluded: np.ndarray, empty: np.ndarray) -> bool:
@@ -90,7 +93,7 @@ class LayerLayout:
         nodes = self.nodes
         if not (np.array_equal(empty, self.empty) and np.array_equal(excluded, self.excluded)):
             return False
-        if matrix.indptr is self.structure[0] and matrix.indices is self.structure[1]:
+        if matrix.indptr is self.structure[0]() and matrix.indices is self.structure[1]():
             return True
         return (np.array_equal(matrix.indptr[nodes + 1] - matrix.indptr[nodes], np.diff(self.rows_indptr))
                 and np.array_equal(matrix.indptr[nodes], self.rows_source[self.rows_indptr[:-1]])
@@ -125,7 +128,7 @@ class LayerLayout:
         symbolic = dataclasses.replace(symbolic, order=nodes[symbolic.order])
         # the matrix's own index types for the rows: the products compile once for both
         return cls(empty.copy(), excluded.copy(), nodes, symbolic, rows_indptr.astype(matrix.indptr.dtype),
-                   columns.astype(matrix.indices.dtype), source, source[inside], (matrix.indptr, matrix.indices))
+                   columns.astype(matrix.indices.dtype), source, source[inside], (weakref.ref(matrix.indptr), weakref.ref(matrix.indices)))
 
 
 def layout_of(matrix, excluded: np.ndarray, weak: np.ndarray, lattice_shape: tuple,
