@@ -2,6 +2,7 @@
 the fixed mass pattern, the compiled CSR product and the benchmark's scene."""
 
 import dataclasses
+import pickle
 import sys
 from pathlib import Path
 
@@ -14,7 +15,7 @@ from femgrid_mpm import Grid
 from femgrid_mpm.bases import BASES
 from femgrid_mpm.kernels.tables import separated_tables
 from femgrid_mpm.kernels.pattern import mass_pattern
-from femgrid_mpm.mass.cg import _preconditioned_cg
+from femgrid_mpm.mass.cg import _column_dots, _preconditioned_cg, _target
 from femgrid_mpm.mass.preconditioners import _apply_tensor, tensor_preconditioner
 from femgrid_mpm.mass.sparse import _symmetric_times_dense_dot
 from femgrid_mpm.solver import Simulation
@@ -124,33 +125,49 @@ def test_boundary_layer_is_symmetric_positive_definite_and_cuts_iterations():
     assert 0 < 2 * layered[2] < alone[2]
 
 
-def test_compiled_layered_cg_is_the_python_loop():
+@pytest.mark.parametrize("rollers", [False, True])
+def test_compiled_layered_cg_is_the_python_loop(rollers):
     """CG with a :class:`BoundaryLayer` on the compiled matrix runs compiled; the Python loop
     (the scipy engine's, reached here through a layer that is not a ``BoundaryLayer``) makes
     the same iterates bit for bit: converged, stopped at the iteration limit, and stopped at
-    ``r.z < 0`` (the layer's pivots negated: ``converged`` None)."""
-    simulation = Simulation(block_scene("bspline3", "consistent", 2500))
+    ``r.z < 0`` (the layer's pivots negated: ``converged`` None), and at a tolerance whose target
+    the first guess's residual meets within a rounding (where two sums of the right-hand side's
+    squares in other orders would stop apart: numpy's norm of one column sums pairwise), on a
+    system of both velocity components and on the two one-component systems of a block on
+    rollers."""
+    scene = block_scene("bspline3", "consistent", 2500)
+    if rollers:
+        scene = type(scene).model_validate({**scene.model_dump(), "supports": [{"where": "x <= 2", "fix": ["x"]}]})
+    simulation = Simulation(scene)
     mass = simulation.mass
     mass.linear_solver = "cg"
     simulation.advance()
-    system = mass._systems[0]
-    tensor = mass.preconditioner.scaled(system)
-    layer = system.boundary_layer(mass.preconditioner.lattice_shape, mass._weak)
-    negative = dataclasses.replace(layer, factors=dataclasses.replace(layer.factors, pivots=-layer.factors.pivots))
-    rhs = np.where(system.excluded[:, None], 0.0, simulation.context.force)
+    assert [len(system.columns) for system in mass._systems] == ([1, 1] if rollers else [2])
 
     class InPython:
         def __init__(self, layer):
             self.sweep = layer.sweep
 
-    outcomes = []
-    for chosen, limit in ((layer, 1000), (layer, 3), (negative, 1000)):
-        compiled_run, python_run = (
-            _preconditioned_cg(system.matrix, rhs, np.zeros_like(rhs), system.inverse_diagonal, 1e-12, limit,
-                               tensor, how) for how in (chosen, InPython(chosen)))
-        assert np.array_equal(compiled_run[0], python_run[0]) and compiled_run[1:] == python_run[1:]
-        outcomes.append(compiled_run[1:])
-    assert outcomes[0][0] is True and outcomes[1] == (False, 3) and outcomes[2][0] is None
+    for system in mass._systems:
+        tensor = mass.preconditioner.scaled(system)
+        layer = system.boundary_layer(mass.preconditioner.lattice_shape, mass._weak)
+        negative = dataclasses.replace(layer, factors=dataclasses.replace(layer.factors, pivots=-layer.factors.pivots))
+        rhs = np.ascontiguousarray(np.where(system.excluded[:, None], 0.0, simulation.context.force[:, system.columns]))
+        guess = 0.9 * rhs * system.inverse_diagonal[:, None]
+        start = np.sqrt(_column_dots(rhs - system.matrix @ guess, rhs - system.matrix @ guess))
+        edge = start[0] / np.linalg.norm(rhs[:, 0])
+        if rollers:  # a tolerance whose targets by numpy's pairwise sum and by the sum in order straddle it
+            edge = next(rtol for rtol in edge * (1 + 1e-16 * np.arange(-64, 64))
+                        if (start[0] <= rtol * np.linalg.norm(rhs[:, 0])) != (start[0] <= _target(rhs, rtol)[0]))
+        outcomes = []
+        for chosen, first, rtol, limit in ((layer, 0 * rhs, 1e-12, 1000), (layer, 0 * rhs, 1e-12, 3),
+                                           (negative, 0 * rhs, 1e-12, 1000), (layer, guess, edge, 1000)):
+            compiled_run, python_run = (
+                _preconditioned_cg(system.matrix, rhs, first, system.inverse_diagonal, rtol, limit, tensor, how)
+                for how in (chosen, InPython(chosen)))
+            assert np.array_equal(compiled_run[0], python_run[0]) and compiled_run[1:] == python_run[1:]
+            outcomes.append(compiled_run[1:])
+        assert outcomes[0][0] is True and outcomes[1] == (False, 3) and outcomes[2][0] is None
 
 
 def test_boundary_layer_keeps_its_layout_while_its_nodes_stay():
@@ -221,6 +238,8 @@ def test_boundary_layer_on_both_engines():
         matrix = simulation.mass._systems[0].matrix
         assert (layout.structure[0]() is matrix.indptr) == (engine == "numba")
         assert (layout.structure[0]() is None) == (engine == "scipy")
+        restored = pickle.loads(pickle.dumps(layout))  # compares by value
+        assert restored.structure[0]() is None and restored.fits(matrix, layout.excluded, layout.empty)
         runs[engine] = simulation
     assert runs["numba"].mass.iterations == runs["scipy"].mass.iterations
     v = runs["numba"].particles.v

@@ -87,6 +87,13 @@ class LayerLayout:
     #: by the layout (at 1e5 points ~5 MB a layout)
     structure: tuple
 
+    def __getstate__(self) -> dict:
+        # a weak reference does not pickle: a copy compares the index arrays by value
+        return {**self.__dict__, "structure": (_gone, _gone)}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+
     def fits(self, matrix, excluded: np.ndarray, empty: np.ndarray) -> bool:
         """Whether it is this system's layer: the same excluded and weak nodes, and the layer's
         rows stored where and as they were (so that both gathers still read them)."""
@@ -129,6 +136,11 @@ class LayerLayout:
         # the matrix's own index types for the rows: the products compile once for both
         return cls(empty.copy(), excluded.copy(), nodes, symbolic, rows_indptr.astype(matrix.indptr.dtype),
                    columns.astype(matrix.indices.dtype), source, source[inside], (weakref.ref(matrix.indptr), weakref.ref(matrix.indices)))
+
+
+def _gone() -> None:
+    """A dead weak reference (:meth:`LayerLayout.__getstate__`)."""
+    return None
 
 
 def layout_of(matrix, excluded: np.ndarray, weak: np.ndarray, lattice_shape: tuple,
