@@ -135,7 +135,8 @@ class LayerLayout:
         symbolic = dataclasses.replace(symbolic, order=nodes[symbolic.order])
         # the matrix's own index types for the rows: the products compile once for both
         return cls(empty.copy(), excluded.copy(), nodes, symbolic, rows_indptr.astype(matrix.indptr.dtype),
-                   columns.astype(matrix.indices.dtype), source, source[inside], (weakref.ref(matrix.indptr), weakref.ref(matrix.indices)))
+                   columns.astype(matrix.indices.dtype), source, source[inside],
+                   (weakref.ref(matrix.indptr), weakref.ref(matrix.indices)))
 
 
 def _gone() -> None:
