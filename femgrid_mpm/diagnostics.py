@@ -192,15 +192,22 @@ WEAK_HINT = 0.1
 RUNAWAY_CAUSES = "a time step above the critical one, or an unstable model"
 
 
-def runaway_causes(solver, nonnegative: bool) -> str:
-    """What a runaway's stop suggests for a scene's ``[solver]``: with consistent mass on a basis
-    whose weak nodes are lumped, also ``weak_fraction``.  A body whose edge crosses a node line
-    leaves the next node a sliver of its function's volume and a mode of almost no mass: q1 and
-    gimp on the drifting bar ran away at steps 24 and 21 at the default 0.01 and completed at 0.1."""
+def runaway_causes(solver, nonnegative: bool, time=None) -> str:
+    """What a runaway's stop suggests for a scene's ``[solver]`` (and ``[time]``): with consistent
+    mass on a basis whose weak nodes are lumped, also ``weak_fraction``.  A body whose edge crosses
+    a node line leaves the next node a sliver of its function's volume and a mode of almost no
+    mass: q1 and gimp on the drifting bar ran away at steps 24 and 21 at the default 0.01 and
+    completed at 0.1.  With ``dt = "auto"``, also ``safety``: the step is the first
+    configuration's, and such modes lower the critical step as the points move (consistent cubic
+    splines' block of 4e5 points: below the run's step by step 1080 of 1143, docs/time_step.md)."""
+    causes = RUNAWAY_CAUSES
     if solver.mass == "consistent" and nonnegative and solver.weak_fraction < WEAK_HINT:
-        return (f"{RUNAWAY_CAUSES}; with consistent mass, nodes a body reaches by their function's tail: "
-                f"solver.weak_fraction = {WEAK_HINT:g} lumps them")
-    return RUNAWAY_CAUSES
+        causes += (f"; with consistent mass, nodes a body reaches by their function's tail: "
+                   f"solver.weak_fraction = {WEAK_HINT:g} lumps them")
+    if time is not None and time.dt == "auto":
+        causes += (f"; dt = \"auto\" is time.safety = {time.safety:g} times the first configuration's critical "
+                   f"step, which moving points can lower: a smaller time.safety keeps a margin")
+    return causes
 
 
 @dataclass

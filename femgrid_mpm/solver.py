@@ -106,7 +106,7 @@ class Simulation:
                                for body, members in zip(scene.bodies, self.body_slices))
         self.energy_guard = EnergyGuard(
             initial=kinetic_energy(self.particles.mass, self.particles.v) + self.strain_energy(),
-            floor=1e-9 * stiffness_volume, causes=runaway_causes(scene.solver, self.grid.nonnegative),
+            floor=1e-9 * stiffness_volume, causes=runaway_causes(scene.solver, self.grid.nonnegative, scene.time),
         )
 
     # -- set-up -----------------------------------------------------------------

@@ -306,11 +306,18 @@ def test_a_consistent_runaway_suggests_the_weak_fraction_and_following_it_comple
     """q1 with consistent mass on the drifting bar: the node ahead of the bar's edge holds a sliver
     of its function's volume, a mode of almost no mass, and the energy runs away at step 24; the
     stop suggests ``solver.weak_fraction = 0.1``, and the run that takes it completes its 186 steps.
-    Lumped mass's stops do not suggest it."""
+    With ``dt = "auto"`` it also suggests a smaller ``time.safety`` (the step is the first
+    configuration's, and the sliver lowers the critical step as the bar moves): at 0.25 and 0.1
+    the run still stops (steps 45 and 262), at 0.05 it completes its 1860 steps.  Lumped mass's
+    stops suggest neither; a given step does not suggest the safety."""
     scene = bundled_scene("drifting_bar").with_overrides(**{"solver.mass": "consistent"})
-    with pytest.raises(SimulationStopped, match=r"step 24 .*solver\.weak_fraction = 0\.1 lumps them") as stop:
+    with pytest.raises(SimulationStopped, match=r"step 24 .*solver\.weak_fraction = 0\.1 lumps them.*"
+                                                r"a smaller time\.safety") as stop:
         Simulation(scene).run()
     assert stop.value.reason == "runaway_energy"
     result = Simulation(scene.with_overrides(**{"solver.weak_fraction": 0.1})).run()
     assert result.summary["steps"] == 186
+    result = Simulation(scene.with_overrides(**{"time.safety": 0.05, "output": None})).run()
+    assert result.summary["steps"] == 1860
     assert runaway_causes(bundled_scene("drifting_bar").solver, True) == RUNAWAY_CAUSES
+    assert "time.safety" not in runaway_causes(scene.solver, True, scene.with_overrides(**{"time.dt": 0.01}).time)
