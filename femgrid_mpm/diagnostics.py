@@ -206,7 +206,7 @@ def runaway_causes(solver, nonnegative: bool, time=None) -> str:
                    f"solver.weak_fraction = {WEAK_HINT:g} lumps them")
     if time is not None and time.dt == "auto":
         causes += (f"; dt = \"auto\" is time.safety = {time.safety:g} times the first configuration's critical "
-                   f"step, which moving points can lower: a smaller time.safety keeps a margin")
+                   f"step, which moving points can lower: a smaller time.safety, dearer, keeps a margin")
     return causes
 
 

@@ -308,8 +308,8 @@ def test_a_consistent_runaway_suggests_the_weak_fraction_and_following_it_comple
     stop suggests ``solver.weak_fraction = 0.1``, and the run that takes it completes its 186 steps.
     With ``dt = "auto"`` it also suggests a smaller ``time.safety`` (the step is the first
     configuration's, and the sliver lowers the critical step as the bar moves): at 0.25 and 0.1
-    the run still stops (steps 45 and 262), at 0.05 it completes its 1860 steps.  Lumped mass's
-    stops suggest neither; a given step does not suggest the safety."""
+    the run still stops (steps 45 and 262 without output), at 0.05 it completes its 1860 steps.
+    Lumped mass's stops do not suggest the weak fraction; a given step does not suggest the safety."""
     scene = bundled_scene("drifting_bar").with_overrides(**{"solver.mass": "consistent"})
     with pytest.raises(SimulationStopped, match=r"step 24 .*solver\.weak_fraction = 0\.1 lumps them.*"
                                                 r"a smaller time\.safety") as stop:
@@ -317,7 +317,12 @@ def test_a_consistent_runaway_suggests_the_weak_fraction_and_following_it_comple
     assert stop.value.reason == "runaway_energy"
     result = Simulation(scene.with_overrides(**{"solver.weak_fraction": 0.1})).run()
     assert result.summary["steps"] == 186
+    for safety, step in ((0.25, 45), (0.1, 262)):
+        with pytest.raises(SimulationStopped, match=rf"^step {step} .*a smaller time\.safety"):
+            Simulation(scene.with_overrides(**{"time.safety": safety, "output": None})).run()
     result = Simulation(scene.with_overrides(**{"time.safety": 0.05, "output": None})).run()
     assert result.summary["steps"] == 1860
-    assert runaway_causes(bundled_scene("drifting_bar").solver, True) == RUNAWAY_CAUSES
+    lumped = bundled_scene("drifting_bar")
+    assert runaway_causes(lumped.solver, True) == RUNAWAY_CAUSES
+    assert "weak_fraction" not in runaway_causes(lumped.solver, True, lumped.time)
     assert "time.safety" not in runaway_causes(scene.solver, True, scene.with_overrides(**{"time.dt": 0.01}).time)
