@@ -87,13 +87,6 @@ class LayerLayout:
     #: by the layout (at 1e5 points ~5 MB a layout)
     structure: tuple
 
-    def __getstate__(self) -> dict:
-        # a weak reference does not pickle: a copy compares the index arrays by value
-        return {**self.__dict__, "structure": (_gone, _gone)}
-
-    def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
-
     def fits(self, matrix, excluded: np.ndarray, empty: np.ndarray) -> bool:
         """Whether it is this system's layer: the same excluded and weak nodes, and the layer's
         rows stored where and as they were (so that both gathers still read them)."""
@@ -137,11 +130,6 @@ class LayerLayout:
         return cls(empty.copy(), excluded.copy(), nodes, symbolic, rows_indptr.astype(matrix.indptr.dtype),
                    columns.astype(matrix.indices.dtype), source, source[inside],
                    (weakref.ref(matrix.indptr), weakref.ref(matrix.indices)))
-
-
-def _gone() -> None:
-    """A dead weak reference (:meth:`LayerLayout.__getstate__`)."""
-    return None
 
 
 def layout_of(matrix, excluded: np.ndarray, weak: np.ndarray, lattice_shape: tuple,
@@ -197,23 +185,16 @@ class BoundaryLayer:
         ``M_LL = L D L^T`` on ``layout``; its solves take and give arrays of the
         system's size, reading and writing the layer's rows only (zero elsewhere).
     rows_data : ndarray, shape (entries,)
-        The entries of ``M[nodes, :]`` on the layout's rows (:attr:`rows`).
+        The entries of ``M[nodes, :]`` (shape (n_layer, n_nodes), stored as the layout's
+        ``rows_indptr`` and ``rows_indices`` say); ``M[:, nodes]`` is its transpose (``M``
+        symmetric), applied by :func:`_transpose_times_dense` (a CSR matrix of the transpose
+        loops over every node's row: 0.25 against 0.09 ms).
     """
 
     nodes: np.ndarray
     factors: NumericLDL
     rows_data: np.ndarray
     layout: LayerLayout
-
-    @property
-    def rows(self) -> sp.csr_matrix:
-        """``M[nodes, :]``, shape (n_layer, n_nodes); ``M[:, nodes]`` is its transpose (``M``
-        symmetric), applied by :func:`_transpose_times_dense` (a CSR matrix of the transpose
-        loops over every node's row: 0.25 against 0.09 ms).  The sweep reads its arrays
-        only (making the scipy matrix every step took 80 us at 1e4 points)."""
-        layout = self.layout
-        return sp.csr_matrix((self.rows_data, layout.rows_indices, layout.rows_indptr),
-                             shape=(len(self.nodes), len(layout.empty)))
 
     @classmethod
     def on(cls, layout: LayerLayout | None, matrix: sp.csr_matrix) -> "BoundaryLayer | None":
