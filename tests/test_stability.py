@@ -129,7 +129,7 @@ def test_large_problems_solve_with_the_mass_component_by_component(monkeypatch):
     critical = Simulation(scene).critical_dt
     (stiffness, mass), = problems
     assert mass.shape[0] > stability.DENSE_LIMIT
-    reference = spla.eigsh(stiffness, k=1, M=mass.tocsc(), which="LA", tol=1e-4,
+    reference = spla.eigsh(stiffness, k=1, M=mass.tocsc(), which="LA", tol=stability.ARPACK_TOLERANCE,
                            v0=stability.arpack_start(mass.shape[0]), return_eigenvectors=False)[0]
     assert critical == pytest.approx(2 / np.sqrt(reference), rel=1e-9)
     (solve, mass), = built
@@ -217,6 +217,6 @@ def test_a_large_mixed_or_treated_mass_solves_component_by_component(monkeypatch
     factors, n = spla.splu(mass), stiffness.shape[0]
     operator = spla.LinearOperator((n, n), dtype=float,
                                    matvec=lambda x: factors.solve(consistent @ factors.solve(stiffness @ x)))
-    reference = np.max(np.abs(spla.eigs(operator, k=1, which="LM", tol=1e-4, v0=stability.arpack_start(n),
+    reference = np.max(np.abs(spla.eigs(operator, k=1, which="LM", tol=stability.ARPACK_TOLERANCE, v0=stability.arpack_start(n),
                                         return_eigenvectors=False)))
     assert critical == pytest.approx(2 / np.sqrt(reference), rel=1e-9)
