@@ -17,7 +17,10 @@ cell, the vibrating bar's cosine velocity, its own step ``0.1 h / c``):
   times a cell's wave transit time ``h / c`` for every basis, the steps and wall
   time of ``run()`` of each mass and their ratios (consistent over lumped), and
   the set-up before it (``Simulation(scene)``, the estimate of the critical step
-  most of it), apart.
+  most of it), apart: each the fastest of :data:`REPEATS` runs, consistent and
+  lumped in turn (a single run's lumped side, 0.01-0.3 s at 1e3-1e4 points,
+  varied enough to move q1's wall ratio between 7.7x and 11.8x over runs), or of
+  one where the consistent run took more than :data:`REPEAT_WITHIN` seconds.
 
 The machine is shared: quote the ratios, which interleaving keeps steadier than
 the times.
@@ -48,6 +51,10 @@ TRANSITS = 100
 #: steps a case must run at the block's step before it is timed: with "auto", the kept factors'
 #: first window and CG's trial against them (femgrid_mpm.mass.layout.CgTrial), 20 steps each
 TRIAL_STEPS = 45
+#: the runs to the same end time: the fastest of this many of each mass ...
+REPEATS = 3
+#: ... but one where the first consistent run and its set-up took more than this many seconds
+REPEAT_WITHIN = 20.0
 WAVE_SPEED = float(np.sqrt(1e4 * 0.7 / (1.3 * 0.4) / 1e3))  # the block's p-wave speed (step.block_scene)
 
 
@@ -90,6 +97,21 @@ def to_end_time(basis: str, mass: str, n: int, settings: dict | None = None) -> 
     return simulation.step_index, time.perf_counter() - built, built - start, status
 
 
+def to_end_times(basis: str, n: int, settings: dict | None = None) -> tuple[tuple, tuple, int]:
+    """:func:`to_end_time` of the consistent and the lumped mass, each the fastest of up to
+    :data:`REPEATS` runs (wall and set-up apart), the two masses in turn; and the runs made of each."""
+    runs = {"consistent": [], "lumped": []}
+    for _ in range(REPEATS):
+        for mass in runs:
+            runs[mass].append(to_end_time(basis, mass, n, settings))
+        _, wall, setup, _ = runs["consistent"][0]
+        if wall + setup > REPEAT_WITHIN:
+            break
+    fastest_runs = tuple((made[0][0], min(run[1] for run in made), min(run[2] for run in made), made[0][3])
+                         for made in runs.values())
+    return fastest_runs[0], fastest_runs[1], len(runs["consistent"])
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="1e3 and 1e4 points only")
@@ -110,7 +132,8 @@ def main(argv=None) -> None:
     bases = args.bases.split(",")
     warnings.simplefilter("ignore")
     chosen = "".join(f"; consistent with {key} = {value}" for key, value in settings.items())
-    print(f"{time.strftime('%Y-%m-%d')}; numpy {np.__version__}; one BLAS thread; end time {TRANSITS} h / c{chosen}\n")
+    print(f"{time.strftime('%Y-%m-%d')}; numpy {np.__version__}; one BLAS thread; end time {TRANSITS} h / c; "
+          f"runs to it the fastest of {REPEATS} (1 where a consistent one took over {REPEAT_WITHIN:g} s){chosen}\n")
     for n in sizes:
         seconds = per_step(bases, n, args.budget, settings)
         print(f"about {n:.0e} points:\n")
@@ -119,9 +142,10 @@ def main(argv=None) -> None:
         print("|---|---|---|---|---|---|---|---|")
         for basis in bases:
             consistent, lumped = seconds[basis, "consistent"], seconds[basis, "lumped"]
-            (steps_c, wall_c, setup_c, status_c), (steps_l, wall_l, setup_l, status_l) = (
-                to_end_time(basis, mass, n, settings) for mass in ("consistent", "lumped"))
+            (steps_c, wall_c, setup_c, status_c), (steps_l, wall_l, setup_l, status_l), made = to_end_times(
+                basis, n, settings)
             note = "" if status_c == status_l == "completed" else f" ({status_c}; {status_l})"
+            note += "" if made == REPEATS else f" ({made} run{'s' if made > 1 else ''})"
             to_end = (f"| {steps_c} / {steps_l} = {steps_c / max(steps_l, 1):.1f}x "
                       f"| {wall_c:.2f} / {wall_l:.2f} s = {wall_c / wall_l:.1f}x{note} "
                       f"| {setup_c:.3f} / {setup_l:.3f} s |")
