@@ -75,11 +75,14 @@ def stiffness_matrix(dNdx: sp.csr_matrix, dNdy: sp.csr_matrix, volume: np.ndarra
 #: the interleaved ``kron(M, I2)``, in its default order, ran cubic splines at 1e6 points out of
 #: 24 GB, and at 1e4 points took 1.7 of the estimate's 2.0 s against 0.6)
 DENSE_LIMIT = 1500
-#: ARPACK's relative residual for the largest eigenvalue.  Its Ritz value is below the
-#: eigenvalue it converges to, and the run takes ``time.safety`` (0.5) of the step: 1e-3 gives
-#: steps 1e-7 to 2e-4 above 1e-4's on the benchmark's blocks (1e4 and 1e5 points, every basis,
-#: consistent and lumped) in a quarter to two thirds of the time (cubic splines at 1e5 points,
-#: consistent mass: 15.0 -> 3.7 s; at 1e-2, 1e-3 above it in 0.3-2.5 s)
+#: ARPACK's relative residual for the largest eigenvalue.  The run takes ``time.safety`` (0.5)
+#: of the step, so the estimate need not be exact: at 1e-3 the steps of the benchmark's blocks
+#: (1e4 and 1e5 points, every basis, consistent and lumped) are within 2e-4 of 1e-4's, and
+#: within 9e-4 of dense solves' on blocks off the node lines (the general product of
+#: :func:`largest_eigenvalue_of_product` can err either way; the symmetric problem of
+#: :func:`largest_frequency_squared` gives a value below the eigenvalue); the products a
+#: solve takes fall most where they are dear: cubic splines at 1e5 points, consistent mass
+#: (weak nodes lumped: the general product, two solves a product), 15.0 -> 3.7 s
 ARPACK_TOLERANCE = 1e-3
 
 
@@ -130,8 +133,9 @@ class _ComponentSolve(spla.LinearOperator):
         vector = np.asarray(vector, dtype=float).ravel()
         out = np.empty_like(vector)
         if len(self.parts) == 2 and self.parts[0][1] is self.parts[1][1]:
-            # one solve of two columns: the same numbers as two solves of one, in 0.6-0.75 of
-            # their time (SuperLU's triangular sweeps read the factors once for both)
+            # one solve of two columns, in 0.6-0.8 of the time of two of one (SuperLU's sweeps
+            # read the factors once for both); the same numbers with this machine's OpenBLAS
+            # (a BLAS whose one-column products take another path could differ in the last bit)
             (first, factors), (second, _) = self.parts
             both = factors.solve(np.column_stack([vector[first], vector[second]]))
             out[first], out[second] = both[:, 0], both[:, 1]
