@@ -1,6 +1,6 @@
 """What consistent mass costs against lumped mass: per step, and to the same end time.
 
-Run: ``python benchmarks/consistent_cost.py`` (about 15 minutes on 2 shared cores;
+Run: ``python benchmarks/consistent_cost.py`` (about 10 minutes on 2 shared cores;
 ``--quick``: 1e3 and 1e4 points; ``--sizes 1000`` and ``--bases q1,bspline3`` choose;
 ``--set solver.weak_ratio=0.5`` sets a key of the consistent runs' scenes, e.g. the weak rows'
 treatment of docs/time_step.md).
