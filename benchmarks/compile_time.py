@@ -24,8 +24,9 @@ load on a shared machine disturbs least).  The workloads:
 ``--kernels`` lists, per workload, every compilation numba reports (its
 ``numba:compile`` events, :mod:`numba.core.event`) with its CPU seconds: each
 kernel with the arguments' types it was specialised for, and indented below
-it the helpers and numba's own overloads compiled for it (a helper inlined
-with ``inline="always"`` has no line of its own), and then the kernels compiled again for
+it the helpers and numba's own overloads compiled for it (the helpers compiled with
+``forceinline=True`` once for their types, LLVM inlining them; an overload inlined with
+``inline="always"`` has no line of its own), and then the kernels compiled again for
 types that differ only in memory order or writability (:func:`recompiled`).
 """
 

@@ -22,7 +22,7 @@ from .compiled import compiled
 from .shape import function_slots, located_weights, point_weights, point_work, tensor_constants
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _relative_velocity(velocity, v_ref, relative):
     """``v_I - v_ref``: the grid velocity in the step's frame (after the constraints)."""
     for i in range(velocity.shape[0]):
@@ -30,7 +30,7 @@ def _relative_velocity(velocity, v_ref, relative):
         relative[i, 1] = velocity[i, 1] - v_ref[1]
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _hand_over(p, divergence, ux, uy, start_motion):
     """What the force pass knows of point p's motion at the step's start and G2P
     needs (:func:`.g2p._move_point`): ``div v`` and ``N @ v_rel``, whose inner sums
@@ -40,7 +40,7 @@ def _hand_over(p, divergence, ux, uy, start_motion):
     start_motion[p, 2] = uy
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, body, strain, stress, start_motion):
     """Paper Eqs. 18 and 6 for point ``p``: strain increment from its velocity
     gradient, the incremental linear elastic stress; ``div v`` and the
@@ -66,7 +66,7 @@ def _linear_elastic_point(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, lame, b
     return s_xx, s_yy, s_xy
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, strain_increment, gradient_increment,
                      start_motion):
     """Eq. 18 for any material: point p's strain increment (added to its strain)
@@ -86,7 +86,7 @@ def _record_gradient(p, dt, dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy, strain, stra
 # -- any basis, function by function: the flat and folded forms (see :mod:`.families`) ---------------------
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _local_gradient(nodes, count, skip, relative, w, wx, wy):
     """``dNdx @ v_rel``, ``dNdy @ v_rel`` and ``N @ v_rel`` at one point:
     (d vx/dx, d vy/dx, d vx/dy, d vy/dy, vx, vy)."""
@@ -111,7 +111,7 @@ def _local_gradient(nodes, count, skip, relative, w, wx, wy):
     return dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _local_force(nodes, count, skip, wx, wy, w_xx, w_yy, w_xy, force):
     """One point's share of Eq. 11, ``-V sigma grad N``, scattered to its nodes."""
     for k in range(count):
@@ -188,7 +188,7 @@ def local_internal_force(x, mass_p, density_p, stress,
 # -- tensor-product bases: sum factorization over the n1 x n1 nodes (see :mod:`.families`) -----------------
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _tensor_gradient(nodes, fx, dfx, fy, dfy, n1, relative):
     """``dNdx @ v_rel``, ``dNdy @ v_rel`` and ``N @ v_rel`` of one point:
     (dvx/dx, dvy/dx, dvx/dy, dvy/dy, vx, vy); the last two reuse the inner sums."""
@@ -220,7 +220,7 @@ def _tensor_gradient(nodes, fx, dfx, fy, dfy, n1, relative):
     return dvx_dx, dvy_dx, dvx_dy, dvy_dy, ux, uy
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _tensor_force(nodes, fx, dfx, fy, dfy, n1, w_xx, w_yy, w_xy, force):
     """Scatter ``-(dNdx (V s_xx, V s_xy) + dNdy (V s_xy, V s_yy))`` of one point."""
     for i in range(n1):

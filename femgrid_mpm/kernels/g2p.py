@@ -22,7 +22,7 @@ from .shape import function_slots, located_weights, point_weights, point_work, s
 SERIES_BOUND = 2.0**-7
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def density_factor(a):
     """``exp(a)`` for Eq. 21's ``a = -dt div v``, within 1 ulp of ``math.exp``.
 
@@ -39,7 +39,7 @@ def density_factor(a):
     return math.exp(a)
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _move_point(p, dt, ax, ay, v_ref, v, x, density_p, start_motion):
     """Eqs. 19-21 for point p from its interpolated acceleration (ax, ay) and what
     the force pass interpolated (``start_motion[p]``: ``div v`` and the relative

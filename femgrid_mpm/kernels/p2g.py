@@ -26,7 +26,7 @@ from .compiled import compiled
 from .shape import function_slots, inside_grid, located_weights, point_weights, point_work, squares, tensor_constants
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _clear_sums(absolute, want_volume, assemble, grid_mass, momentum, grid_absolute, grid_volume, matrix):
     """Zero what a P2G pass sums into: mass, momentum and what it is asked for."""
     grid_mass[:] = 0.0
@@ -39,14 +39,14 @@ def _clear_sums(absolute, want_volume, assemble, grid_mass, momentum, grid_absol
         matrix[:] = 0.0
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _mirror(matrix, mirror_target, mirror_source):
     """The assembled mass matrix's lower half (stencil order) from its upper half."""
     for t in range(mirror_target.shape[0]):
         matrix[mirror_target[t]] = matrix[mirror_source[t]]
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _no_pattern():
     """Stand-ins for the mass pattern's arrays when no matrix is assembled (never read, so
     left uninitialized: numba's ``np.zeros`` compiles in twice the time of ``np.empty``,

@@ -109,7 +109,7 @@ def _g2p_chunk_kernel(x, v, density_p, acceleration, v_ref, dt, start_motion, hr
     return folded
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _bounds(chunk, n_chunks, n):
     return chunk * n // n_chunks, (chunk + 1) * n // n_chunks
 

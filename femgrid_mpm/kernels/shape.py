@@ -3,8 +3,11 @@
 Everything here is inlined into the passes (:mod:`.p2g`, :mod:`.force`,
 :mod:`.g2p`): numba overloads, written out for the number ``n1`` of 1D
 factors per direction (``len(marker)``, a compile-time constant, so every
-loop over the ``n1 x n1`` slots is unrolled), and helpers compiled
-``inline="always"``.
+loop over the ``n1 x n1`` slots is unrolled), inlined in numba's IR
+(``inline="always"``), and helpers compiled once for their types and inlined
+by LLVM (``forceinline=True``: numba's IR inlining types a helper again at
+every call; a cold serendipity bar with lumped mass compiled in 17.5-18.5
+CPU s that way, in 9.1-10.6 s this way, docs/performance.md).
 
 A point is located exactly as :meth:`femgrid_mpm.Grid.locate` does (same
 arithmetic, so the same element and cell coordinates bit for bit).
@@ -160,7 +163,7 @@ def _cell_nodes(topology, ix, iy, n_y, marker):
     return namespace["computed"]
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y, table_y, uniform):
     """What every point of a tensor kernel needs, loaded once before the loop over points
     (locals stay in registers; array reads would be repeated per point, as the
@@ -170,7 +173,7 @@ def tensor_constants(marker, geometry, n_elements, factors_x, table_x, factors_y
             load_table(factors_x, table_x[uniform[0]], marker), load_table(factors_y, table_y[uniform[2]], marker))
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def inside_grid(px, py, constants):
     """Whether a point lies in the grid (False for NaN): the test of every point, before
     its weights, in P2G and the shape-function matrices (a test first and a return was
@@ -178,7 +181,7 @@ def inside_grid(px, py, constants):
     return px >= constants[0] and px <= constants[2] and py >= constants[1] and py <= constants[3]
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def located_weights(px, py, constants, marker, factors_x, table_x, factors_y, table_y, topology):
     """Nodes (:func:`cell_nodes`) and the 1D factors ``(fx, dfx, fy, dfy)`` of a point in the grid.
 
@@ -229,7 +232,7 @@ def _squares(f):
 # -- function by function: the flat (tables) and folded (serendipity) forms -------------------------------
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def evaluate_point(px, py, constants, marker, factors_x, table_x, factors_y, table_y, connectivity, terms,
                    term_weights, q, qx, qy, unused, w, wx, wy):
     """Shape functions of a point in the grid (see :func:`located_weights`) into ``w, wx,

@@ -220,7 +220,7 @@ def _layered_cg(indptr, indices, data, upper_start, b, x0, rtol, max_iterations,
     return x, 0, max_iterations
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _precondition(r, z, use_tensor, inverse_diagonal, scale, excluded, factor_x, factor_y):
     """``z = P^-1 r``: the splines' tensor Gram preconditioner, or Jacobi."""
     if use_tensor:
@@ -243,7 +243,7 @@ def _target(b, rtol):
     return rtol * np.sqrt(target)
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _all_within(residual, target):
     """Whether every column's squared residual norm is within its target norm."""
     for c in range(residual.shape[0]):

@@ -87,7 +87,7 @@ def gauss_seidel_cg(matrix, b: np.ndarray, x0: np.ndarray, rtol: float, max_iter
                             rtol, max_iterations)
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def zero_columns(b, x):
     """``x``'s columns zero where ``b``'s are (a zero right-hand side: the solution is zero)."""
     n, k = b.shape
@@ -101,7 +101,7 @@ def zero_columns(b, x):
                 x[i, c] = 0.0
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def errors_within(error, size, rtol) -> bool:
     """Whether every column's largest error estimate is within ``rtol`` of its largest value (NaN: not)."""
     for c in range(error.shape[0]):
@@ -158,7 +158,7 @@ def _gauss_seidel_cg(indptr, indices, data, upper_start, half, inverse, b, x0, r
     return x, False, max_iterations
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _residual_down(indptr, indices, data, upper_start, inverse, b, x, w):
     """``w = (D + L)^-1 (b - A x)`` for two columns in one pass down the stored half: row ``i``
     gathers its later columns' ``a_ij x_j``, has every earlier row's ``a_li (x_l + w_l)`` already,
@@ -192,7 +192,7 @@ def _residual_down(indptr, indices, data, upper_start, inverse, b, x, w):
             w[j, 1] = fused(data[entry], y1, w[j, 1])
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _sweep_down(indptr, indices, data, upper_start, inverse, v, t, q, s, product, sums):
     """``v = (D + L)^-1 v`` in place, ``L`` the transpose of the stored upper half: each
     finished unknown scattered down its row's later columns, the nearest first (the next
@@ -244,7 +244,7 @@ def _sweep_down(indptr, indices, data, upper_start, inverse, v, t, q, s, product
                 sums[2, c] = fused(v[i, c], w, sums[2, c])
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _sweep_up(indptr, indices, data, upper_start, inverse, q, s, alpha, beta, t, previous, u, x, step, rr, size,
               error):
     """One pass up the rows, from the last.  ``step``: first CG's step along the last

@@ -62,7 +62,7 @@ class PatternMatrix:
         return self._matrix
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _row_times_dense(indptr, indices, data, x, i):
     """Row i of ``A @ x`` for x of shape (n, 2), as four partial sums per column:
     the sums of a row (49 entries for cubic splines) are chains of dependent
@@ -201,7 +201,7 @@ def _symmetric_times_dense_dot(indptr, indices, data, upper_start, x, out, dot):
             dot[c] = fused(x[i, c], out[i, c], dot[c])
 
 
-@compiled(inline="always")
+@compiled(forceinline=True)
 def _product_dot(indptr, indices, data, upper_start, x, out, dot):
     """``out = A @ x`` and the dots ``x . out``: from one half when ``upper_start`` is given
     (a symmetric stencil-ordered matrix), else row by row."""
