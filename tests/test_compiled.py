@@ -12,18 +12,20 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 from femgrid_mpm.kernels import compiled as compiled_module
 from femgrid_mpm.kernels.compiled import PREFIX, cache_key, fingerprint
 
 
-def _write_package(root: Path, value: float, note: str = "") -> None:
+def _write_package(root: Path, value: float, note: str = "", inlining: str = 'inline="always"') -> None:
     package = root / "inlining"
     package.mkdir(exist_ok=True)
     (package / "__init__.py").write_text("")
     (package / "helpers.py").write_text(textwrap.dedent(f"""
         from femgrid_mpm.kernels.compiled import compiled
 
-        @compiled(inline="always")
+        @compiled({inlining})
         def constant():
             return {value!r}
         """))
@@ -50,12 +52,15 @@ def _run_kernel(root: Path, cache: Path, stderr: list | None = None) -> tuple[fl
     return float(value), hit == "True"
 
 
-def test_an_edit_of_an_inlined_helper_recompiles_the_kernel(tmp_path):
+@pytest.mark.parametrize("inlining", ['inline="always"', "forceinline=True"])
+def test_an_edit_of_an_inlined_helper_recompiles_the_kernel(tmp_path, inlining):
+    """Inlined in numba's IR or by LLVM (the library's helpers), an edit of the helper alone
+    gives the caller a fresh compilation."""
     cache = tmp_path / "cache"
-    _write_package(tmp_path, 1.0)
+    _write_package(tmp_path, 1.0, inlining=inlining)
     assert _run_kernel(tmp_path, cache) == (1.0, False)  # compiled
     assert _run_kernel(tmp_path, cache) == (1.0, True)   # loaded
-    _write_package(tmp_path, 2.0)  # kernels.py unchanged: plain numba would load 1.0 here
+    _write_package(tmp_path, 2.0, inlining=inlining)  # kernels.py unchanged: plain numba would load 1.0 here
     assert _run_kernel(tmp_path, cache) == (2.0, False)
     assert _run_kernel(tmp_path, cache) == (2.0, True)
     (own,) = cache.iterdir()  # one directory for this package's path

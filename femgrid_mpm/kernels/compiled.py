@@ -9,7 +9,7 @@ inside-grid test that had been edited out of the module it inlines).
 :func:`compiled` therefore caches every kernel in
 a directory named by a fingerprint of all modules of the kernel's package
 that mention numba or this decorator: an edit of any of them gives a new
-directory and a fresh compilation (about a minute for every kernel), an
+directory and a fresh compilation (43-49 CPU s for every kernel `reproduce` runs), an
 unchanged tree loads in about a second.
 
 Where (:func:`cache_directory`): ``<package>/__pycache__/numba-<fingerprint>``
@@ -28,7 +28,7 @@ Processes that compile into one directory at once (a sweep's workers) save each
 kernel under a lock (:func:`locked_save`): numba's own save lets them lose or swap
 each other's entries.
 
-A first use compiles for about a minute: :func:`note_compilation` says so
+A first use compiles for a few seconds to under a minute: :func:`note_compilation` says so
 once, on the ``femgrid_mpm`` logger (INFO, which the command line shows as one
 line), when numba starts compiling one of the library's functions and the tree's
 cache holds no kernel yet.
@@ -111,7 +111,7 @@ def note_compilation() -> bool:
     where = (f"they are cached in {directory} and load in about a second from then on" if directory is not None
              else "no cache directory is writable, so every process compiles them")
     logging.getLogger("femgrid_mpm").info(
-        "compiling the numba kernels, about a minute on first use (only once: %s)", where)
+        "compiling the numba kernels, seconds to a minute on first use (only once: %s)", where)
     return True
 
 
@@ -224,6 +224,9 @@ def compiled(**options):
     True
     """
     cache = options.pop("cache", True)
+    # numba passes a caller's forceinline on to a callee that does not set it, so a kernel first
+    # compiled for a forceinline helper would be always-inline in one cache and not in another
+    options.setdefault("forceinline", False)
 
     def decorate(function):
         root = _source_root(function) if cache else None
