@@ -55,6 +55,9 @@ class SystemsLayout:
     stale_cg: bool = False  # solved by CG instead of kept factors (make_systems, CgTrial)
     edges: dict = field(default_factory=dict)  # {columns: SymbolicLDL or None} (.singular)
     _key: str | None = field(default=None, compare=False, repr=False)  # (key(), made once)
+    # what every_step() and factored_work() found for the small layouts they were given (`small` is
+    # replaced, never changed in place; the set and the sum took ~3 us a step at 1e3 points)
+    _of_small: tuple | None = field(default=None, compare=False, repr=False)
 
     @classmethod
     def of(cls, active: np.ndarray, weak: np.ndarray, fixed: np.ndarray | None, linear_solver: str) -> "SystemsLayout":
@@ -73,11 +76,28 @@ class SystemsLayout:
             self._key = hashlib.blake2b(nodes, digest_size=8).hexdigest()
         return self._key
 
-    def every_step(self, stale: bool = False) -> set:
+    def every_step(self, stale: bool = False) -> frozenset:
         """The columns of the systems factored every step (:attr:`.ldl.SymbolicLDL.every_step`; with
         ``stale``, kept factors made again at most steps, :attr:`.ldl.SymbolicLDL.every_step_when_stale`)."""
-        return {columns for columns, layout in (self.small or {}).items()
-                if (layout.every_step_when_stale if stale else layout.every_step)}
+        found = self._found()
+        if stale not in found:
+            found[stale] = frozenset(columns for columns, layout in (self.small or {}).items()
+                                     if (layout.every_step_when_stale if stale else layout.every_step))
+        return found[stale]
+
+    def factored_work(self) -> float:
+        """A step's work on the small systems factored every step (:func:`.trial.factored_work`,
+        two solves each)."""
+        found = self._found()
+        if "work" not in found:
+            found["work"] = sum(factored_work(symbolic, 2) for symbolic in (self.small or {}).values())
+        return found["work"]
+
+    def _found(self) -> dict:
+        """The cache of :meth:`every_step` and :meth:`factored_work` for the current ``small``."""
+        if self._of_small is None or self._of_small[0] is not self.small:
+            self._of_small = (self.small, {})
+        return self._of_small[1]
 
 
 
@@ -133,8 +153,7 @@ class RunChoices:
             self.tensor_cg = not layout.direct
         if keeps_factors and layout.direct:
             if layout.small and set(layout.groups) <= layout.every_step(stale):
-                self.factored.observe(layout.key(), len(layout.small),
-                                      sum(factored_work(symbolic, 2) for symbolic in layout.small.values()))
+                self.factored.observe(layout.key(), len(layout.small), layout.factored_work())
             else:  # on kept factors: a trial from here is theirs
                 self.factored.last = False
         on_kept = keeps_factors and layout.direct and not stale
