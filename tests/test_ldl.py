@@ -100,3 +100,18 @@ def test_a_run_factored_every_step_is_the_direct_solvers(basis):
     assert np.abs(every.particles.v - direct.particles.v).max() <= 1e-12 * scale
     assert np.abs(every.particles.x - direct.particles.x).max() <= 1e-12
     assert every.mass.iterations == 0
+
+
+def test_a_layouts_systems_factored_every_step_follow_its_small_layouts():
+    """What ``SystemsLayout`` keeps for its small systems' layouts (the systems factored every
+    step, their work) is theirs: the same as found afresh, and found again when they are replaced."""
+    from femgrid_mpm.mass.trial import factored_work
+
+    layout = advanced("q1").mass._layout
+    small = layout.small
+    assert layout.every_step() == {(0, 1)} and layout.every_step(stale=True) == {(0, 1)}
+    assert layout.factored_work() == factored_work(small[(0, 1)], 2) > 0
+    layout.small = {}  # a new layout analysis with no small system
+    assert layout.every_step() == frozenset() and layout.factored_work() == 0
+    layout.small = small
+    assert layout.every_step() == {(0, 1)} and layout.factored_work() == factored_work(small[(0, 1)], 2)
