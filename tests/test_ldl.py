@@ -10,6 +10,7 @@ import scipy.sparse.linalg as spla
 
 from femgrid_mpm.mass import ldl
 from femgrid_mpm.mass.direct import _factor
+from femgrid_mpm.mass.trial import factored_work
 from helpers import advanced_benchmark_block
 
 
@@ -105,8 +106,6 @@ def test_a_run_factored_every_step_is_the_direct_solvers(basis):
 def test_a_layouts_systems_factored_every_step_follow_its_small_layouts():
     """What ``SystemsLayout`` keeps for its small systems' layouts (the systems factored every
     step, their work) is theirs: the same as found afresh, and found again when they are replaced."""
-    from femgrid_mpm.mass.trial import factored_work
-
     layout = advanced("q1").mass._layout
     small = layout.small
     assert layout.every_step() == {(0, 1)} and layout.every_step(stale=True) == {(0, 1)}
