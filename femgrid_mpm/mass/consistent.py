@@ -1,38 +1,33 @@
 """Consistent mass ``N.T diag(m_p) N`` (paper Eqs. 10, 17, 19, 20) and what makes it solvable.
 
-``M`` is positive semi-definite.  It is singular when a node's function is
-seen by too few points to fix its value, e.g. a node touched only by the far
-edge of a body, or, globally, a body with fewer points across than basis
-functions span it (cubic B-splines with 2 points per cell in a body 2 cells
-thick).  Momentum always lies in the range of ``M`` (so velocities *at the
-points* are right), but internal forces in general do not, and velocity
-*gradients* there are arbitrary.  We treat it in three layers:
+``M`` is positive semi-definite. It is singular when a node's function is seen by too few points to
+fix its value, e.g. a node touched only by the far edge of a body, or, globally, a body with fewer
+points across than basis functions span it (cubic B-splines with 2 points per cell in a body 2
+cells thick). Momentum always lies in the range of ``M`` (so velocities *at the points* are right),
+but internal forces in general do not, and velocity *gradients* there are arbitrary. We treat it in
+three layers:
 
 1. *Empty nodes* (``M_ii = 0``) are removed: identity rows, zero solution.
-2. *Weak nodes* of non-negative bases (q1, bspline3), whose material volume
-   fraction ``(N.T @ V_p)_i / integral(phi_i)`` is below ``weak_fraction``,
-   are lumped: each coupling ``M_ij`` to a weak node is moved onto both
-   diagonals.  This keeps every row sum (so rigid motion and momentum stay
-   exact) and only adds positive semi-definite terms, so it never makes the
-   matrix less definite.  Rows seen through their function's tail, which set
-   the critical step, give a share of their couplings (:mod:`.weak_rows`).
-3. What remains singular is *detected*: a SuperLU pivot falls below
-   ``1e-8`` of its own diagonal entry (the node's function is reproduced by
-   the others), or preconditioned CG fails to converge on the force system.  The ``fallback`` policy decides:
-   ``"error"`` raises :class:`SingularMassError`; ``"blend"`` solves with
-   ``(1 - blend) M + blend * diag(lumped)`` for that step, counts the event
-   and goes on (where row sums are not all positive, q2 and serendipity,
-   the HRZ diagonal, ``M_ii`` scaled to the total mass, replaces them).
+2. *Weak nodes* of non-negative bases (q1, bspline3), whose material volume fraction
+   ``(N.T @ V_p)_i / integral(phi_i)`` is below ``weak_fraction``, are lumped: each coupling
+   ``M_ij`` to a weak node is moved onto both diagonals. This keeps every row sum (so rigid motion
+   and momentum stay exact) and only adds positive semi-definite terms, so it never makes the
+   matrix less definite. Rows seen through their function's tail, which set the critical step,
+   give a share of their couplings (:mod:`.weak_rows`).
+3. What remains singular is *detected*: a SuperLU pivot falls below ``1e-8`` of its own diagonal
+   entry (the node's function is reproduced by the others), or preconditioned CG fails to converge
+   on the force system. The ``fallback`` policy decides: ``"error"`` raises
+   :class:`SingularMassError`; ``"blend"`` solves with ``(1 - blend) M + blend * diag(lumped)`` for
+   that step, counts the event and goes on (where row sums are not all positive, q2 and
+   serendipity, the HRZ diagonal, ``M_ii`` scaled to the total mass, replaces them).
 
-Linear solver: ``"direct"`` factors the matrix once per step with SuperLU
-(:mod:`.direct`; both solves of the step reuse the factors) and checks every
-solution's residual, because SuperLU returns garbage without warning on a
-singular matrix.  ``"cg"`` is preconditioned CG warm-started from the last
-steps (:mod:`.cg`: symmetric Gauss-Seidel, :mod:`.gauss_seidel`; for cubic
-splines a tensor Gram preconditioner, :mod:`.preconditioners`).  ``"auto"``
-factors up to 5000 active nodes: small systems every step (:mod:`.ldl`), the
-others kept as CG's preconditioner (:mod:`.reused`) while they pay against CG
-(:mod:`.trial`, :mod:`.layout`).
+Linear solver: ``"direct"`` factors the matrix once per step with SuperLU (:mod:`.direct`; both
+solves of the step reuse the factors) and checks every solution's residual, because SuperLU returns
+garbage without warning on a singular matrix. ``"cg"`` is preconditioned CG warm-started from the
+last steps (:mod:`.cg`: symmetric Gauss-Seidel, :mod:`.gauss_seidel`; for cubic splines a tensor
+Gram preconditioner, :mod:`.preconditioners`). ``"auto"`` factors up to 5000 active nodes: small
+systems every step (:mod:`.ldl`), the others kept as CG's preconditioner (:mod:`.reused`) while
+they pay against CG (:mod:`.trial`, :mod:`.layout`).
 """
 
 from __future__ import annotations
@@ -283,8 +278,8 @@ class ConsistentMass(MassModel):
         the clamp.  And a blend whose diagonal D is not the row sums (HRZ:
         q2, serendipity) has ``B 1 != L``, which adds ``blend (L - D) v_ref``.
         """
-        # the solution is the one system's own where it solves both columns (zeros: ~2 us a solve)
-        solution, moving = None, frame is not None and any(frame.tolist())  # (a list's any: 0.1 us, frame.any() 1 us)
+        solution = None  # one system of both columns returns its own (no zeros to copy it over)
+        moving = frame is not None and any(frame.tolist())  # (a list's any: 0.1 us, frame.any() 1 us)
         coupling = None  # M_fc v_ref on the free rows
         if moving and self.fixed is not None:
             coupling = self.apply(np.where(self.fixed, frame, 0.0))
@@ -303,8 +298,7 @@ class ConsistentMass(MassModel):
             if whole:
                 solution = solved
             else:
-                if solution is None:
-                    solution = np.zeros(rhs.shape)
+                solution = np.zeros(rhs.shape) if solution is None else solution
                 solution[:, system.columns] = solved
         if solution is None:  # nothing to solve
             solution = np.zeros(rhs.shape)
