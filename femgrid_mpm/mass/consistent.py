@@ -79,8 +79,8 @@ class ConsistentMass(MassModel):
         leave them out of the solve (zeroing them afterwards, exact for a
         diagonal mass, is wrong here).
     preconditioner : TensorPreconditioner, optional
-        CG's for cubic B-splines (:func:`.preconditioners.tensor_preconditioner`);
-        None: Jacobi.
+        CG's for cubic B-splines (:func:`.preconditioners.tensor_preconditioner`); None:
+        symmetric Gauss-Seidel on the mass pattern's matrix (:mod:`.gauss_seidel`), else Jacobi.
     lattice : ndarray of int, shape (n_nodes, 2), optional
         Each node's x and y index on the lattice, and ``layer_width`` the
         width of an element in lattice spacings: where CG looks for a
