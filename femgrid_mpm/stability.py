@@ -30,6 +30,7 @@ import scipy.sparse.linalg as spla
 from .bases import BASES
 from .quadrature import MassReconstruction, StressReconstruction
 from .mass.direct import symmetric_lu
+from .mass.iterated import corrected_inverse
 from .schemes import SCHEMES
 
 def bloch_time_step(basis: str, mass: str, spacing: float, wave_speed: float) -> float:
@@ -263,6 +264,11 @@ def _largest_frequency_squared(inertia, point_mass: np.ndarray, free: np.ndarray
         # different masses): B = D^-1 C D^-1 is symmetric
         return largest_eigenvalue_of_product(effective, stiffness, symmetric=np.array_equal(*inertia.inverses))
     mass = sp.kron(inertia.matrix, sp.identity(2), format="csr")[free][:, free]
+    if inertia.corrections:  # solved by k Jacobi corrections of the lumped solution (.mass.iterated)
+        consistent = mass if inertia.consistent is None else \
+            sp.kron(inertia.consistent, sp.identity(2), format="csr")[free][:, free]
+        sandwich = _CorrectedSandwich(mass, consistent, np.repeat(inertia.row_sums, 2)[free], inertia.corrections)
+        return largest_eigenvalue_of_product(sandwich, stiffness, symmetric=True)
     if inertia.consistent is None:
         solve = _ComponentSolve(inertia.matrix, free) if mass.shape[0] > DENSE_LIMIT else None
         return largest_frequency_squared(stiffness, mass, solve)
@@ -290,3 +296,24 @@ class _InverseSandwich:
     def toarray(self) -> np.ndarray:
         inverse = self._solve(np.eye(self.shape[0]))
         return inverse @ self._consistent.toarray() @ inverse
+
+
+class _CorrectedSandwich:
+    """``A_k C A_k``, ``A_k`` the inverse of M by k Jacobi corrections of the lumped solution
+    over the row sums (:func:`femgrid_mpm.mass.iterated.corrected_inverse`), on the free
+    degrees of freedom; made dense for the small problems of :func:`largest_eigenvalue_of_product`."""
+
+    def __init__(self, mass: sp.csr_matrix, consistent: sp.csr_matrix, row_sums: np.ndarray, corrections: int):
+        self.shape, self._mass, self._consistent, self._corrections = mass.shape, mass, consistent, corrections
+        positive = row_sums > 0
+        self._inverse_rows = np.where(positive, 1.0 / np.where(positive, row_sums, 1.0), 0.0)
+
+    def _corrected(self, columns: np.ndarray) -> np.ndarray:
+        return corrected_inverse(self._mass, columns, self._inverse_rows, self._corrections)
+
+    def __matmul__(self, vector: np.ndarray) -> np.ndarray:
+        columns = vector.reshape(len(vector), -1)
+        return self._corrected(self._consistent @ self._corrected(columns)).reshape(vector.shape)
+
+    def toarray(self) -> np.ndarray:
+        return self @ np.eye(self.shape[0])

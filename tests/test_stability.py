@@ -22,6 +22,10 @@ CASES = [
     ("cantilever", "q2", "lumped"),
     ("cantilever", "bspline3", "consistent"),
     ("cantilever", "bspline3_open", "lumped"),
+    # the Jacobi-corrected lumped inverse A_k: its inverse mass A_k M_C A_k (.mass.iterated)
+    ("vibrating_bar", "bspline3", "iterated"),
+    ("cantilever", "bspline3", "iterated"),
+    ("vibrating_bar", "q1", "iterated"),
 ]
 
 

@@ -64,7 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
     def scene_arguments(command):
         command.add_argument("scene", metavar="SCENE.toml", help="the scene file")
         command.add_argument("--basis", choices=list(BASES), help="override [grid] basis")
-        command.add_argument("--mass", choices=["lumped", "consistent", "hrz"], help="override [solver] mass")
+        command.add_argument("--mass", choices=["lumped", "consistent", "hrz", "iterated"], help="override [solver] mass")
         command.add_argument(
             "--set",
             dest="settings",

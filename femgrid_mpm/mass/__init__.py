@@ -1,4 +1,4 @@
-"""Grid mass: lumped (paper Eqs. 15-16), HRZ, consistent (Eqs. 10, 17, 19, 20) and per body.
+"""Grid mass: lumped (paper Eqs. 15-16), HRZ, consistent (Eqs. 10, 17, 19, 20), iterated and per body.
 
 Every model implements :class:`~.protocol.MassModel`: ``assemble`` once per
 step, then ``grid_velocity`` (Eq. 17) and ``solve`` for the nodal
@@ -22,6 +22,7 @@ declares in ``assembly`` (:class:`~.protocol.Assembly`).
 ``scale.py``           :class:`CellMasses`: a full cell of the material at each node, the scale of "empty"
 ``constraint.py``      mirrored ghost nodes: ``v = T w`` and the mass ``T.T M T`` (:class:`ConstrainedMass`)
 ``weak_rows.py``       the rows that set the consistent mass's critical step; the mixed mass
+``iterated.py``        :class:`IteratedMass`: the consistent systems solved by k Jacobi corrections
 =====================  ==========================================================
 """
 
@@ -30,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from .consistent import ConsistentMass
+from .iterated import IteratedMass
 from .layout import DIRECT_LIMIT
 from .constraint import ConstrainedMass, NodeConstraint
 from .diagonal import HrzMass, LumpedMass, positive_weights
@@ -40,7 +42,7 @@ from .scale import CellMasses
 from .weak_rows import interior_ratio
 
 __all__ = [
-    "Assembly", "CellMasses", "ConsistentMass", "ConstrainedMass", "NodeConstraint", "DIRECT_LIMIT", "FieldLumpedMass", "HrzMass", "Inertia", "LumpedMass", "MassModel",
+    "Assembly", "CellMasses", "ConsistentMass", "ConstrainedMass", "NodeConstraint", "DIRECT_LIMIT", "FieldLumpedMass", "HrzMass", "Inertia", "IteratedMass", "LumpedMass", "MassModel",
     "NodalSums", "SingularMassError", "build_mass_model", "positive_weights", "tensor_preconditioner",
 ]
 
@@ -69,6 +71,9 @@ def build_mass_model(solver, grid, cells: CellMasses, per_body: bool = False,
     if constraint is not None:
         if per_body:
             raise ValueError("supports with ghosts = 'mirrored' need one shared velocity field (not frictional contact)")
+        if solver.mass == "iterated":
+            raise ValueError("supports with ghosts = 'mirrored' solve the folded consistent mass exactly: "
+                             "use mass = 'consistent' or 'lumped' with them, not 'iterated'")
         # mirrored ghost nodes are tied to interior ones: their rows are not weak once folded
         inner = _unconstrained(solver, grid, cells, time_step, solves=False, weak_ratio=0.0)
         return ConstrainedMass(inner, constraint, diagonal=not isinstance(inner, ConsistentMass))
@@ -88,6 +93,10 @@ def _unconstrained(solver, grid, cells: CellMasses, time_step: float | None, fix
             return LumpedMass(grid.n_nodes, cells, threshold=solver.mass_threshold,
                               node_integrals=grid.node_integrals)
         return LumpedMass(grid.n_nodes, cells)
+    if solver.mass == "iterated":  # the consistent systems, solved by a fixed number of corrections
+        return IteratedMass(grid.n_nodes, cells, node_integrals=grid.node_integrals, nonnegative=grid.nonnegative,
+                            weak_fraction=solver.weak_fraction, linear_solver="cg", fixed=fixed,
+                            time_step=time_step, solves=solves, corrections=solver.mass_corrections)
     return ConsistentMass(
         grid.n_nodes,
         cells,

@@ -85,12 +85,16 @@ class Inertia:
     its velocity and acceleration inverses and the weights that carry momentum
     between points and grid; or a coupled ``matrix``, with ``consistent``, the
     points' ``N.T diag(m) N``, where the matrix differs from it (weak rows lumped,
-    a mixed mass): the iteration's inverse mass is then ``M^-1 M_C M^-1``."""
+    a mixed mass): the iteration's inverse mass is then ``M^-1 M_C M^-1``.  With
+    ``corrections`` k > 0 the matrix is solved by k Jacobi corrections of its lumped
+    solution over ``row_sums`` (:mod:`.iterated`): ``A_k M_C A_k`` instead."""
 
     inverses: tuple[np.ndarray, np.ndarray] | None = None
     transfer: sp.csr_matrix | None = None
     matrix: sp.csr_matrix | None = None
     consistent: sp.csr_matrix | None = None
+    row_sums: np.ndarray | None = None
+    corrections: int = 0
 
 
 class MassModel(abc.ABC):

@@ -95,8 +95,10 @@ class TimeSpec(_Model):
 class SolverSpec(_Model):
     """``[solver]``: mass kind and what to do when masses misbehave.
 
-    ``mass``: ``"lumped"`` (row sums), ``"consistent"`` or ``"hrz"`` (a
-    positive diagonal for every basis, :class:`femgrid_mpm.mass.HrzMass`).
+    ``mass``: ``"lumped"`` (row sums), ``"consistent"``, ``"hrz"`` (a
+    positive diagonal for every basis, :class:`femgrid_mpm.mass.HrzMass`) or
+    ``"iterated"`` (the consistent mass solved by ``mass_corrections`` Jacobi
+    corrections of the lumped solution, :mod:`femgrid_mpm.mass.iterated`).
     ``negative_mass`` (lumped mass): ``"error"`` stops the run at the first
     negative lumped grid mass, ``"warn"`` records it and goes on,
     ``"threshold"`` records it and, at every node whose volume fraction is
@@ -121,7 +123,9 @@ class SolverSpec(_Model):
     quadrature over the filled cells (``"reconstructed"``, :mod:`femgrid_mpm.quadrature`).
     """
 
-    mass: Literal["lumped", "consistent", "hrz"] = "lumped"
+    mass: Literal["lumped", "consistent", "hrz", "iterated"] = "lumped"
+    #: mass = "iterated": the Jacobi corrections of the lumped solution that stand for the consistent solve
+    mass_corrections: Annotated[int, Field(ge=1, le=20)] = 2
     negative_mass: Literal["error", "warn", "threshold"] = "error"
     #: negative_mass = "threshold": below this fraction of a node's full share, its absolute mass is used
     mass_threshold: Annotated[float, Field(ge=0, lt=1)] = 0.01
@@ -301,6 +305,10 @@ class Scene(_Model):
                              "negative; contact's velocity corrections are of one step: use 'paper' or 'centred'")
         if self.contact is not None and self.contact.kind == "frictional" and self.solver.mass != "lumped":
             raise ValueError("contact.kind: 'frictional' contact needs solver.mass = \"lumped\" (one lumped field per body)")
+        if self.solver.mass == "iterated" and not BASES[self.grid.basis].nonnegative:
+            raise ValueError(f"solver.mass: 'iterated' divides by the row sums, which {self.grid.basis}'s signed "
+                             "functions can make zero or negative: use a non-negative basis (q1, gimp, B-splines), "
+                             "or mass = \"consistent\"")
         if self.solver.negative_mass == "threshold" and self.solver.mass == "lumped":
             if not BASES[self.grid.basis].mass_threshold:
                 raise ValueError(
