@@ -43,7 +43,10 @@ def test_every_bundled_sweep_plans(name):
                          "cantilever_convergence": 7 * 3, "bar_time_steps": 16,
                          "manufactured_large_convergence": 5 * 2 * 3, "drifting_bar_convergence": 5 * 4,
                          "manufactured_rollers": 8 * 3 * 3 * 4, "rollers_quadrature": 2 * 2 * 2 * 3,
-                         "mixed_mass": 3 * (3 + 1) * 4}[name]  # three mixes of consistent mass, and lumped
+                         "mixed_mass": 3 * (3 + 1) * 4,  # three mixes of consistent mass, and lumped
+                         # three bases x (three corrections of the iterated mass, consistent, lumped)
+                         # x two schemes x three spacings
+                         "iterated_mass": 3 * (3 + 2) * 2 * 3}[name]
 
 
 def test_the_vibration_energy_error_is_the_balance_over_the_largest_strain(tmp_path):

@@ -16,11 +16,11 @@ from pathlib import Path
 #: the sweeps run, in order: the bar and the manufactured solution over every basis and mass
 #: kind, the quasi-static cantilever, the bar's time-step sweep, the manufactured mode on rollers
 #: over every basis, mass kind and scheme, the same mode with open knots over the force's and the
-#: mass's quadrature, the bar with the mixed mass, and the two where points cross cells (the
-#: manufactured solution at large amplitude, the drifting bar)
+#: mass's quadrature, the bar with the mixed mass and with the iterated mass, and the two where
+#: points cross cells (the manufactured solution at large amplitude, the drifting bar)
 SWEEPS = ("bar_convergence", "manufactured_convergence", "cantilever_convergence", "bar_time_steps",
-          "manufactured_rollers", "rollers_quadrature", "mixed_mass", "manufactured_large_convergence",
-          "drifting_bar_convergence")
+          "manufactured_rollers", "rollers_quadrature", "mixed_mass", "iterated_mass",
+          "manufactured_large_convergence", "drifting_bar_convergence")
 #: sweeps of a body that vibrates about a rigid motion: their energy table too
 ENERGY_SWEEPS = ("drifting_bar_convergence",)
 
