@@ -66,8 +66,30 @@ class IteratedMass(ConsistentMass):
         return Inertia(matrix=self.matrix, consistent=self._consistent, row_sums=self.lumped,
                        corrections=self.corrections)
 
-    def _solve(self, system, rhs: np.ndarray, kind: str) -> tuple[np.ndarray, bool]:
+    def _solve_system(self, system, part: np.ndarray, kind: str, coupled: np.ndarray | None = None,
+                      frame: np.ndarray | None = None) -> np.ndarray:
+        """``A_k`` of the free rows' ``part``.  In a frame moving at ``v_ref`` with supports
+        (``coupled`` given) the velocity is the absolute one's, ``A_k p - v_ref``: ``A_k`` is not
+        the inverse, so the exact solve's ``A_k (p_rel + M_fc v_ref)`` would differ from it by
+        ``E^(k+1) 1 v_ref`` (``E = I - L^-1 M_ff``) next to the supports, and the result would
+        depend on the frame (the first point's velocity).  ``A_k L 1 - 1 = sum_(j=1..k) E^j 1``
+        is what the frame adds; it is zero away from the supports, so without them the frame
+        adds nothing and is left out."""
         inverse_rows = np.zeros(len(self.lumped))
         rows = ~system.excluded & (self.lumped > 0)
         inverse_rows[rows] = 1.0 / self.lumped[rows]
-        return corrected_inverse(system.matrix, rhs, inverse_rows, self.corrections), True
+        solution = corrected_inverse(system.matrix, part, inverse_rows, self.corrections)
+        if coupled is not None and frame is not None:
+            solution += frame_share(system.matrix, inverse_rows, self.corrections) * frame[None, :]
+        return solution
+
+
+def frame_share(matrix, inverse_rows: np.ndarray, corrections: int) -> np.ndarray:
+    """``sum_(j=1..k) E^j 1`` on the solved rows (``E = I - L^-1 M``), (n, 1): what ``A_k``
+    makes of a uniform velocity's momentum beyond the velocity itself."""
+    term = (inverse_rows > 0).astype(float)[:, None]  # 2-D: the half-stored matrix's product
+    share = np.zeros_like(term)
+    for _ in range(corrections):
+        term = term - inverse_rows[:, None] * (matrix @ term)
+        share += term
+    return share

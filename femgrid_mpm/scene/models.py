@@ -95,10 +95,8 @@ class TimeSpec(_Model):
 class SolverSpec(_Model):
     """``[solver]``: mass kind and what to do when masses misbehave.
 
-    ``mass``: ``"lumped"`` (row sums), ``"consistent"``, ``"hrz"`` (a
-    positive diagonal for every basis, :class:`femgrid_mpm.mass.HrzMass`) or
-    ``"iterated"`` (the consistent mass solved by ``mass_corrections`` Jacobi
-    corrections of the lumped solution, :mod:`femgrid_mpm.mass.iterated`).
+    ``mass``: ``"lumped"`` (row sums), ``"consistent"``, ``"hrz"`` (a positive diagonal
+    for every basis, :class:`femgrid_mpm.mass.HrzMass`) or ``"iterated"`` (:mod:`femgrid_mpm.mass.iterated`).
     ``negative_mass`` (lumped mass): ``"error"`` stops the run at the first
     negative lumped grid mass, ``"warn"`` records it and goes on,
     ``"threshold"`` records it and, at every node whose volume fraction is
@@ -306,9 +304,8 @@ class Scene(_Model):
         if self.contact is not None and self.contact.kind == "frictional" and self.solver.mass != "lumped":
             raise ValueError("contact.kind: 'frictional' contact needs solver.mass = \"lumped\" (one lumped field per body)")
         if self.solver.mass == "iterated" and not BASES[self.grid.basis].nonnegative:
-            raise ValueError(f"solver.mass: 'iterated' divides by the row sums, which {self.grid.basis}'s signed "
-                             "functions can make zero or negative: use a non-negative basis (q1, gimp, B-splines), "
-                             "or mass = \"consistent\"")
+            raise ValueError(f"solver.mass: 'iterated' divides by the row sums, which {self.grid.basis}'s signed functions can "
+                             "make zero or negative: use a non-negative basis (q1, gimp, B-splines), or mass = \"consistent\"")
         if self.solver.negative_mass == "threshold" and self.solver.mass == "lumped":
             if not BASES[self.grid.basis].mass_threshold:
                 raise ValueError(
