@@ -309,7 +309,7 @@ class _CorrectedSandwich:
         self._inverse_rows = np.where(positive, 1.0 / np.where(positive, row_sums, 1.0), 0.0)
 
     def _corrected(self, columns: np.ndarray) -> np.ndarray:
-        return corrected_inverse(self._mass, columns, self._inverse_rows, self._corrections)
+        return corrected_inverse(self._mass.__matmul__, columns, self._inverse_rows[:, None], self._corrections)
 
     def __matmul__(self, vector: np.ndarray) -> np.ndarray:
         columns = vector.reshape(len(vector), -1)

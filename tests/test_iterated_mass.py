@@ -30,8 +30,7 @@ def test_the_solve_is_the_truncated_neumann_series_of_the_consistent_mass(basis,
     """On the clamped cantilever (supports: each component's free nodes differ from the
     active ones), ``x = sum_(j=0..k) (I - L^-1 M_ff)^j L^-1 b`` on each component's free
     active nodes, ``M = N.T diag(m) N`` and ``L`` its full row sums, made densely here: to 1e-12."""
-    scene = bundled_variant("cantilever", basis, "iterated", **{"solver.mass_corrections": corrections,
-                                                                   "solver.weak_fraction": 0.0})
+    scene = bundled_variant("cantilever", basis, "iterated", **{"solver.mass_corrections": corrections})
     simulation, model, N = assembled(scene)
     mass = (N.T @ (N.multiply(simulation.particles.mass[:, None]))).toarray()
     row_sums = mass.sum(axis=1)

@@ -18,6 +18,7 @@ import scipy.sparse as sp
 
 from ..kernels import parallel
 from ..kernels.families import FAMILIES
+from ..kernels.mass_product import weighted_mass_product
 from ..kernels.pattern import mass_pattern
 from ..kernels.shape_matrices import evaluate_shape_functions
 from ..kernels.tables import separated_tables
@@ -49,6 +50,7 @@ class CompiledTransfer(Engine):
         passes = FAMILIES["tensor" if family == "tensor" else "local"]  # the flat and folded forms share kernels
         self._p2g, self._p2g_sums, self._g2p = passes.p2g, passes.p2g_sums, passes.g2p
         self._stress_and_force = passes.stress_and_force
+        self._point_weights = passes.point_weights
         self._velocity_gradient, self._internal_force = passes.velocity_gradient, passes.internal_force
         self.signed = not grid.nonnegative
         self.matrices = ShapeFunctionMatrices(grid, self.basis)
@@ -83,7 +85,13 @@ class CompiledTransfer(Engine):
             hrz=self.grid_absolute if self.hrz else None,
             volume=self.grid_volume if self.want_volume else None,
             pattern=self.pattern,
+            product=self._mass_product if assembly.product else None,
         )
+        self._points = simulation.particles  # the points of the last P2G, for the product
+        if assembly.product:  # each point's values and nodes, recorded at the step's first product
+            slots = tables.connectivity.shape[1] if family == "flat" else len(tables.marker) ** 2
+            self._weights, self._nodes = np.empty((n, slots)), np.empty((n, slots), dtype=np.uint32)
+            self._weights_recorded = False
         self._cells = simulation.cell_masses
         # threads: chunked variants of the tensor and folded kernels (lumped P2G, linear elastic stress,
         # G2P), whose serial kernel the basis' form picks (None: tensor)
@@ -108,6 +116,7 @@ class CompiledTransfer(Engine):
 
     def to_grid(self, ctx: StepContext, mass) -> np.ndarray:
         p = ctx.particles
+        self._points, self._weights_recorded = p, False
         self.matrices.invalidate()
         mass.points_moved()
         momentum = np.empty(self._grid_shape)
@@ -135,6 +144,16 @@ class CompiledTransfer(Engine):
             sums = dataclasses.replace(sums, scale=self._cells.at_nodes(ctx.N))
         mass.assemble_sums(sums)
         return momentum
+
+    def _mass_product(self, field: np.ndarray) -> np.ndarray:
+        """``N.T diag(m_p) N field`` at the points' places of the last P2G, serially."""
+        points = self._points
+        if not self._weights_recorded:
+            self._point_weights(points.x, *self._arrays, self._weights, self._nodes)
+            self._weights_recorded = True
+        out = np.empty(self._grid_shape)
+        weighted_mass_product(points.mass, self._weights, self._nodes, np.ascontiguousarray(field, dtype=float), out)
+        return out
 
     def internal_force(self, ctx: StepContext, dt: float, materials, body_slices) -> np.ndarray:
         p = ctx.particles

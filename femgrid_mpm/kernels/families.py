@@ -32,6 +32,7 @@ from typing import Callable
 from .force import (local_internal_force, local_linear_elastic_stress_and_force, local_velocity_gradient,
                     tensor_internal_force, tensor_linear_elastic_stress_and_force, tensor_velocity_gradient)
 from .g2p import local_g2p, tensor_g2p
+from .mass_product import local_point_weights, tensor_point_weights
 from .p2g import local_p2g, local_p2g_sums, tensor_p2g, tensor_p2g_sums
 
 
@@ -49,6 +50,8 @@ class Passes:
         Eq. 18, then Eq. 11 after the materials' own update (:mod:`.force`).
     g2p : callable
         Eqs. 19-21 (:mod:`.g2p`).
+    point_weights : callable
+        Each point's function values and nodes, for the matrix-free mass product (:mod:`.mass_product`).
     """
 
     p2g: Callable
@@ -57,12 +60,13 @@ class Passes:
     velocity_gradient: Callable
     internal_force: Callable
     g2p: Callable
+    point_weights: Callable
 
 
 #: the passes of each family (the flat and folded forms share the ``local`` kernels)
 FAMILIES = {
     "tensor": Passes(tensor_p2g, tensor_p2g_sums, tensor_linear_elastic_stress_and_force, tensor_velocity_gradient,
-                     tensor_internal_force, tensor_g2p),
+                     tensor_internal_force, tensor_g2p, tensor_point_weights),
     "local": Passes(local_p2g, local_p2g_sums, local_linear_elastic_stress_and_force, local_velocity_gradient,
-                    local_internal_force, local_g2p),
+                    local_internal_force, local_g2p, local_point_weights),
 }

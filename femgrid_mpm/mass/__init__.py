@@ -22,7 +22,7 @@ declares in ``assembly`` (:class:`~.protocol.Assembly`).
 ``scale.py``           :class:`CellMasses`: a full cell of the material at each node, the scale of "empty"
 ``constraint.py``      mirrored ghost nodes: ``v = T w`` and the mass ``T.T M T`` (:class:`ConstrainedMass`)
 ``weak_rows.py``       the rows that set the consistent mass's critical step; the mixed mass
-``iterated.py``        :class:`IteratedMass`: the consistent systems solved by k Jacobi corrections
+``iterated.py``        :class:`IteratedMass`: the consistent mass solved by k Jacobi corrections
 =====================  ==========================================================
 """
 
@@ -93,10 +93,8 @@ def _unconstrained(solver, grid, cells: CellMasses, time_step: float | None, fix
             return LumpedMass(grid.n_nodes, cells, threshold=solver.mass_threshold,
                               node_integrals=grid.node_integrals)
         return LumpedMass(grid.n_nodes, cells)
-    if solver.mass == "iterated":  # the consistent systems, solved by a fixed number of corrections
-        return IteratedMass(grid.n_nodes, cells, node_integrals=grid.node_integrals, nonnegative=grid.nonnegative,
-                            weak_fraction=solver.weak_fraction, linear_solver="cg", fixed=fixed,
-                            time_step=time_step, solves=solves, corrections=solver.mass_corrections)
+    if solver.mass == "iterated":  # lumped mass and a fixed number of corrections towards consistent mass
+        return IteratedMass(grid.n_nodes, cells, corrections=solver.mass_corrections, fixed=fixed)
     return ConsistentMass(
         grid.n_nodes,
         cells,

@@ -22,74 +22,102 @@ mu)^(k+1))^2 / mu`` of lumped mass's ``mu``: the largest over ``mu`` grows with 
 grows.  Constant fields are exact for every ``k`` (``L^-1 M 1 = 1`` away from supports): a rigid
 translation is projected unchanged.
 
-The systems (supports, empty and weak nodes) are the consistent mass's (:mod:`.consistent`);
-only their solve differs.  Row sums must be positive: non-negative bases only.
+Nothing is assembled but the row sums: each correction takes the product of ``M = N.T diag(m_p)
+N`` with the last solution from the points (:mod:`femgrid_mpm.kernels.mass_product`: a gather and
+a scatter a point, cubic splines' 16 x 16 couplings a point never formed).  The nodes are lumped
+mass's (empty ones out); supports hold their degrees of freedom at zero and out of ``M``'s
+rows.  Row sums must be positive: non-negative bases only.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
+import scipy.sparse as sp
 
-from .consistent import ConsistentMass
-from .protocol import Inertia
+from .diagonal import LumpedMass
+from .protocol import Assembly, Inertia, NodalSums
 
 
-def corrected_inverse(matrix, rhs: np.ndarray, inverse_rows: np.ndarray, corrections: int) -> np.ndarray:
-    """``A_k rhs`` (rhs (n, columns)): ``corrections`` Jacobi corrections of ``rhs / L`` on
-    ``matrix`` (``inverse_rows``: ``1 / L`` on the solved rows, zero elsewhere)."""
-    scale = inverse_rows[:, None]
-    x = rhs * scale
+def corrected_inverse(product: Callable, rhs: np.ndarray, inverse_rows: np.ndarray, corrections: int) -> np.ndarray:
+    """``A_k rhs`` (rhs (n, columns)): ``corrections`` Jacobi corrections of ``rhs / L`` with
+    ``product(x) = M x`` (``inverse_rows``: ``1 / L`` on the solved rows, zero elsewhere, of the
+    shape of rhs or (n, 1))."""
+    x = rhs * inverse_rows
     for _ in range(corrections):
-        x += (rhs - matrix @ x) * scale
+        x += (rhs - product(x)) * inverse_rows
     return x
 
 
+def frame_share(product: Callable, inverse_rows: np.ndarray, corrections: int) -> np.ndarray:
+    """``sum_(j=1..k) E^j 1`` on the solved rows (``E = I - L^-1 M``), of the shape of
+    ``inverse_rows``: what ``A_k`` makes of a uniform velocity's momentum beyond the velocity."""
+    term = (inverse_rows > 0).astype(float)
+    share = np.zeros_like(term)
+    for _ in range(corrections):
+        term = term - inverse_rows * product(term)
+        share += term
+    return share
+
+
 @dataclass
-class IteratedMass(ConsistentMass):
+class IteratedMass(LumpedMass):
     """The consistent mass solved by ``corrections`` Jacobi corrections of the lumped solution.
 
-    Parameters as :class:`.consistent.ConsistentMass`, and ``corrections`` (``k >= 1``), the
-    terms after the first of the truncated Neumann series of ``M^-1``.
+    Parameters as :class:`.diagonal.LumpedMass` (no threshold), and ``corrections`` (``k >= 1``),
+    the terms after the first of the truncated Neumann series of ``M^-1``, and ``fixed`` (n_nodes,
+    2), the degrees of freedom the supports hold at zero: left out of the corrections' rows and
+    columns (zeroing them afterwards, exact for a diagonal mass, is not for ``A_k``).
     """
 
     corrections: int = 2
+    fixed: np.ndarray | None = field(default=None, repr=False)
     kind = "iterated"
+    _product: Callable | None = field(default=None, init=False, repr=False)
+    _point_mass: np.ndarray | None = field(default=None, init=False, repr=False)
 
     @property
-    def _keeps_history(self) -> bool:
-        return False  # a fixed map of the right-hand side: no first guess to make
+    def assembly(self) -> Assembly:
+        """The row sums and the consistent matrix's product."""
+        return Assembly(product=True)
 
-    def inertia(self, N) -> Inertia:
-        """The matrix and the row sums: the iteration's inverse mass is ``A_k M_C A_k``."""
-        return Inertia(matrix=self.matrix, consistent=self._consistent, row_sums=self.lumped,
-                       corrections=self.corrections)
+    def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
+        super().assemble(N, m_p, volume_p)
+        self._point_mass = m_p
+        self._product = lambda values: N.T @ (m_p[:, None] * (N @ values))
 
-    def _solve_system(self, system, part: np.ndarray, kind: str, coupled: np.ndarray | None = None,
-                      frame: np.ndarray | None = None) -> np.ndarray:
-        """``A_k`` of the free rows' ``part``.  In a frame moving at ``v_ref`` with supports
-        (``coupled`` given) the velocity is the absolute one's, ``A_k p - v_ref``: ``A_k`` is not
-        the inverse, so the exact solve's ``A_k (p_rel + M_fc v_ref)`` would differ from it by
-        ``E^(k+1) 1 v_ref`` (``E = I - L^-1 M_ff``) next to the supports, and the result would
-        depend on the frame (the first point's velocity).  ``A_k L 1 - 1 = sum_(j=1..k) E^j 1``
-        is what the frame adds; it is zero away from the supports, so without them the frame
-        adds nothing and is left out."""
-        inverse_rows = np.zeros(len(self.lumped))
-        rows = ~system.excluded & (self.lumped > 0)
-        inverse_rows[rows] = 1.0 / self.lumped[rows]
-        solution = corrected_inverse(system.matrix, part, inverse_rows, self.corrections)
-        if coupled is not None and frame is not None:
-            solution += frame_share(system.matrix, inverse_rows, self.corrections) * frame[None, :]
-        return solution
+    def assemble_sums(self, sums: NodalSums) -> None:
+        super().assemble_sums(sums)
+        self._product = sums.product
 
+    def _column_inverse(self) -> np.ndarray:
+        """``1 / L`` on each component's solved rows: the active nodes the supports leave free."""
+        inverse = self._inverse[:, None]
+        return inverse if self.fixed is None else np.where(self.fixed, 0.0, inverse)
 
-def frame_share(matrix, inverse_rows: np.ndarray, corrections: int) -> np.ndarray:
-    """``sum_(j=1..k) E^j 1`` on the solved rows (``E = I - L^-1 M``), (n, 1): what ``A_k``
-    makes of a uniform velocity's momentum beyond the velocity itself."""
-    term = (inverse_rows > 0).astype(float)[:, None]  # 2-D: the half-stored matrix's product
-    share = np.zeros_like(term)
-    for _ in range(corrections):
-        term = term - inverse_rows[:, None] * (matrix @ term)
-        share += term
-    return share
+    def solve(self, rhs: np.ndarray, kind: str = "velocity") -> np.ndarray:
+        """``A_k rhs`` on each component's free active nodes, zero elsewhere."""
+        return corrected_inverse(self._product, rhs, self._column_inverse(), self.corrections)
+
+    def grid_velocity(self, relative_momentum: np.ndarray, frame_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. 17 in the frame moving with ``frame_velocity``: the velocity is the absolute solve's,
+        ``A_k p - v_ref`` relative to it.  ``A_k`` is not the inverse: ``A_k L 1 = 1 + sum_(j=1..k)
+        E^j 1`` (``E = I - L^-1 M``), whose sum is zero but next to supports, where the frame's
+        velocity would otherwise depend on the frame (the first point's velocity)."""
+        frame = np.asarray(frame_velocity, dtype=float)
+        inverse = self._column_inverse()
+        relative = corrected_inverse(self._product, relative_momentum, inverse, self.corrections)
+        if self.fixed is not None and self.fixed.any() and frame.any():
+            relative += frame_share(self._product, inverse, self.corrections) * frame
+        return relative_momentum + self.lumped[:, None] * frame, relative + frame
+
+    def apply(self, vector: np.ndarray) -> np.ndarray:
+        """``M @ vector`` with the consistent matrix."""
+        return self._product(vector)
+
+    def inertia(self, N: sp.csr_matrix) -> Inertia:
+        """The consistent matrix and the row sums: the iteration's inverse mass is ``A_k M_C A_k``."""
+        matrix = (N.T @ N.multiply(self._point_mass[:, None])).tocsr()
+        return Inertia(matrix=matrix, row_sums=np.where(self.active, self.lumped, 0.0), corrections=self.corrections)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -49,12 +50,16 @@ class Assembly:
     per_body : bool
         One grid field per body (frictional contact): every grid array has a
         leading body axis, and the step runs the per-body engine.
+    product : bool
+        The consistent matrix's product with nodal fields, ``N.T diag(m_p) N f``,
+        as a function of ``f`` (:attr:`NodalSums.product`), not the matrix.
     """
 
     node_volume: bool = False
     matrix: bool = False
     hrz_weights: bool = False
     per_body: bool = False
+    product: bool = False
 
 
 @dataclass(frozen=True)
@@ -67,7 +72,8 @@ class NodalSums:
     ``N.T @ V_p`` and ``pattern`` the assembled matrix when the model's
     :class:`Assembly` asks for them (else None); ``scale`` a full cell's mass at
     each node when the bodies' differ (:meth:`femgrid_mpm.mass.CellMasses.at_nodes`;
-    None: the one of all bodies).
+    None: the one of all bodies); ``product`` the consistent matrix's product with a
+    nodal field (n_nodes, 2) at the points' places of this pass, when asked for.
     """
 
     mass: np.ndarray
@@ -76,6 +82,7 @@ class NodalSums:
     volume: np.ndarray | None = None
     pattern: object | None = None
     scale: np.ndarray | None = None
+    product: Callable[[np.ndarray], np.ndarray] | None = None
 
 
 @dataclass(frozen=True)
