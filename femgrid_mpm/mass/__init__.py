@@ -94,7 +94,8 @@ def _unconstrained(solver, grid, cells: CellMasses, time_step: float | None, fix
                               node_integrals=grid.node_integrals)
         return LumpedMass(grid.n_nodes, cells)
     if solver.mass == "iterated":  # lumped mass and a fixed number of corrections towards consistent mass
-        return IteratedMass(grid.n_nodes, cells, corrections=solver.mass_corrections, fixed=fixed)
+        k = solver.mass_corrections  # its products from the points while they cost less (.iterated)
+        return IteratedMass(grid.n_nodes, cells, corrections=k, fixed=fixed, assembled=8 * k > grid.n_local + 4)
     return ConsistentMass(
         grid.n_nodes,
         cells,

@@ -22,11 +22,14 @@ mu)^(k+1))^2 / mu`` of lumped mass's ``mu``: the largest over ``mu`` grows with 
 grows.  Constant fields are exact for every ``k`` (``L^-1 M 1 = 1`` away from supports): a rigid
 translation is projected unchanged.
 
-Nothing is assembled but the row sums: each correction takes the product of ``M = N.T diag(m_p)
-N`` with the last solution from the points (:mod:`femgrid_mpm.kernels.mass_product`: a gather and
-a scatter a point, cubic splines' 16 x 16 couplings a point never formed).  The nodes are lumped
-mass's (empty ones out); supports hold their degrees of freedom at zero and out of ``M``'s
-rows.  Row sums must be positive: non-negative bases only.
+Each correction takes a product of ``M = N.T diag(m_p) N`` with the last solution: from the
+points (``assembled`` False: :mod:`femgrid_mpm.kernels.mass_product`, a gather and a scatter a
+point, the ``s x s`` couplings of a point's ``s`` functions never formed) or from the matrix the
+P2G pass assembles into the grid's pattern.  A product from the points costs ~2.5x one from the
+matrix (cubic splines, 2 x 2 points a cell), the assembly ~3 of those: the points win while
+``8 k <= s + 4`` (the rule of :func:`femgrid_mpm.mass.build_mass_model`; measured, docs/performance.md).
+The nodes are lumped mass's (empty ones out); supports hold their degrees of freedom at zero and
+out of ``M``'s rows.  Row sums must be positive: non-negative bases only.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ import scipy.sparse as sp
 
 from .diagonal import LumpedMass
 from .protocol import Assembly, Inertia, NodalSums
+from .sparse import _CompiledCSR
 
 
 def corrected_inverse(product: Callable, rhs: np.ndarray, inverse_rows: np.ndarray, corrections: int) -> np.ndarray:
@@ -51,46 +55,48 @@ def corrected_inverse(product: Callable, rhs: np.ndarray, inverse_rows: np.ndarr
     return x
 
 
-def frame_share(product: Callable, inverse_rows: np.ndarray, corrections: int) -> np.ndarray:
-    """``sum_(j=1..k) E^j 1`` on the solved rows (``E = I - L^-1 M``), of the shape of
-    ``inverse_rows``: what ``A_k`` makes of a uniform velocity's momentum beyond the velocity."""
-    term = (inverse_rows > 0).astype(float)
-    share = np.zeros_like(term)
-    for _ in range(corrections):
-        term = term - inverse_rows * product(term)
-        share += term
-    return share
-
-
 @dataclass
 class IteratedMass(LumpedMass):
     """The consistent mass solved by ``corrections`` Jacobi corrections of the lumped solution.
 
     Parameters as :class:`.diagonal.LumpedMass` (no threshold), and ``corrections`` (``k >= 1``),
-    the terms after the first of the truncated Neumann series of ``M^-1``, and ``fixed`` (n_nodes,
+    the terms after the first of the truncated Neumann series of ``M^-1``; ``fixed`` (n_nodes,
     2), the degrees of freedom the supports hold at zero: left out of the corrections' rows and
-    columns (zeroing them afterwards, exact for a diagonal mass, is not for ``A_k``).
+    columns (zeroing them afterwards, exact for a diagonal mass, is not for ``A_k``); ``assembled``:
+    the products from the assembled matrix (else from the points).
     """
 
     corrections: int = 2
     fixed: np.ndarray | None = field(default=None, repr=False)
+    assembled: bool = True
     kind = "iterated"
     _product: Callable | None = field(default=None, init=False, repr=False)
     _point_mass: np.ndarray | None = field(default=None, init=False, repr=False)
+    _over: tuple | None = field(default=None, init=False, repr=False)  # (pattern, its matrix)
 
     @property
     def assembly(self) -> Assembly:
         """The row sums and the consistent matrix's product."""
-        return Assembly(product=True)
+        return Assembly(matrix=True) if self.assembled else Assembly(product=True)
 
     def assemble(self, N: sp.csr_matrix, m_p: np.ndarray, volume_p: np.ndarray | None = None) -> None:
         super().assemble(N, m_p, volume_p)
         self._point_mass = m_p
-        self._product = lambda values: N.T @ (m_p[:, None] * (N @ values))
+        if self.assembled:
+            self._product = (N.T @ N.multiply(m_p[:, None])).tocsr().__matmul__
+        else:
+            self._product = lambda values: N.T @ (m_p[:, None] * (N @ values))
 
     def assemble_sums(self, sums: NodalSums) -> None:
         super().assemble_sums(sums)
-        self._product = sums.product
+        if sums.pattern is None:
+            self._product = sums.product
+            return
+        if self._over is None or self._over[0] is not sums.pattern:  # a view of the pattern's entries
+            matrix = _CompiledCSR(sums.pattern.matrix(), copy=False)
+            matrix.upper_start = sums.pattern.diagonal
+            self._over = (sums.pattern, matrix)
+        self._product = self._over[1].__matmul__
 
     def _column_inverse(self) -> np.ndarray:
         """``1 / L`` on each component's solved rows: the active nodes the supports leave free."""
@@ -103,15 +109,16 @@ class IteratedMass(LumpedMass):
 
     def grid_velocity(self, relative_momentum: np.ndarray, frame_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 17 in the frame moving with ``frame_velocity``: the velocity is the absolute solve's,
-        ``A_k p - v_ref`` relative to it.  ``A_k`` is not the inverse: ``A_k L 1 = 1 + sum_(j=1..k)
-        E^j 1`` (``E = I - L^-1 M``), whose sum is zero but next to supports, where the frame's
-        velocity would otherwise depend on the frame (the first point's velocity)."""
+        ``A_k p``.  ``A_k`` is not the inverse: ``A_k L 1 = 1 + sum_(j=1..k) E^j 1`` (``E = I -
+        L^-1 M``), whose sum is zero but next to supports, so there the relative momentum's solve
+        plus the frame would depend on the frame (the first point's velocity): with supports the
+        absolute momentum is solved (the frame's digits are kept where no support breaks ``A_k L 1 = 1``)."""
         frame = np.asarray(frame_velocity, dtype=float)
+        momentum = relative_momentum + self.lumped[:, None] * frame
         inverse = self._column_inverse()
-        relative = corrected_inverse(self._product, relative_momentum, inverse, self.corrections)
-        if self.fixed is not None and self.fixed.any() and frame.any():
-            relative += frame_share(self._product, inverse, self.corrections) * frame
-        return relative_momentum + self.lumped[:, None] * frame, relative + frame
+        if self.fixed is not None and self.fixed.any() and frame.any():  # the rows not solved keep v_ref, as lumped mass's
+            return momentum, np.where(inverse > 0, corrected_inverse(self._product, momentum, inverse, self.corrections), frame)
+        return momentum, corrected_inverse(self._product, relative_momentum, inverse, self.corrections) + frame
 
     def apply(self, vector: np.ndarray) -> np.ndarray:
         """``M @ vector`` with the consistent matrix."""
