@@ -85,9 +85,13 @@ CASES = {
     # consistent mass by CG: its warm start carries over
     "bspline3 consistent cg": (bundled_scene("vibrating_bar").with_overrides(
         **{"grid.basis": "bspline3", "solver.mass": "consistent", "time.end": 0.6}), 50, with_cg),
-    # the iterated mass (a fixed map of each step's right-hand side: nothing of it carries over)
+    # the iterated mass (a fixed map of each step's right-hand side: nothing of it carries over), its
+    # products from the points (k = 2 on cubic splines)
     "bspline3 iterated": (bundled_scene("vibrating_bar").with_overrides(
         **{"grid.basis": "bspline3", "solver.mass": "iterated", "time.end": 0.6}), 50, None),
+    # the same with its products from the assembled matrix (k = 3), on supports
+    "q1 iterated, assembled": (bundled_scene("cantilever").with_overrides(
+        **{"grid.basis": "q1", "solver.mass": "iterated", "solver.mass_corrections": 3, "time.end": 0.6}), 50, None),
     # consistent mass, "auto" below the direct limit: the kept factors carry over
     "q1 consistent auto": (bundled_scene("vibrating_bar").with_overrides(
         **{"solver.mass": "consistent", "time.end": 0.6}), 50, None),

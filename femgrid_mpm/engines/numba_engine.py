@@ -76,8 +76,6 @@ class CompiledTransfer(Engine):
             connectivity = tables.connectivity
             self.pattern = mass_pattern(grid, connectivity)
             self._ordered = family == "tensor" and _ordered_slots(self.pattern, len(tables.marker))
-            self.want_volume = True
-            self.grid_volume = np.zeros(n_nodes)
         # what P2G hands the mass model: these buffers, refilled every step
         self._sums = NodalSums(
             mass=self.grid_mass,

@@ -112,7 +112,8 @@ class IteratedMass(LumpedMass):
         ``A_k p``.  ``A_k`` is not the inverse: ``A_k L 1 = 1 + sum_(j=1..k) E^j 1`` (``E = I -
         L^-1 M``), whose sum is zero but next to supports, so there the relative momentum's solve
         plus the frame would depend on the frame (the first point's velocity): with supports the
-        absolute momentum is solved (the frame's digits are kept where no support breaks ``A_k L 1 = 1``)."""
+        absolute momentum is solved (its round-off then scales with the frame's speed, as lumped
+        mass's does), without them the relative one."""
         frame = np.asarray(frame_velocity, dtype=float)
         momentum = relative_momentum + self.lumped[:, None] * frame
         inverse = self._column_inverse()
