@@ -12,8 +12,8 @@ On a mode where ``M`` has the share ``mu`` of the row sums (``L^-1 M v = mu v``,
 the smooth modes, where ``1 - mu`` is of order ``h^2``, get the consistent mass to ``(1 -
 mu)^(k+1)``, and the rough ones, whose ``mu`` is small (a node that the points see through its
 function's tail, a checkerboard), keep about ``k + 1`` times their lumped mass.  Consistent mass
-divides those by ``mu``: they set its critical step (cubic B-splines: 13.6x lumped mass's steps
-on the bar, see docs/time_step.md); here they do not.
+divides those by ``mu``: they set its critical step (cubic B-splines: 13.8x lumped mass's steps
+on the bar, docs/time_step.md); here they do not.
 
 The iteration projects the velocity afresh from the points each step, so its inverse mass is
 ``A_k M_C A_k`` (:func:`femgrid_mpm.stability.critical_time_step`), on a mode ``(1 - (1 -
@@ -26,7 +26,7 @@ Each correction takes a product of ``M = N.T diag(m_p) N`` with the last solutio
 points (``assembled`` False: :mod:`femgrid_mpm.kernels.mass_product`, a gather and a scatter a
 point, the ``s x s`` couplings of a point's ``s`` functions never formed) or from the matrix the
 P2G pass assembles into the grid's pattern.  A product from the points costs ~2.5x one from the
-matrix (cubic splines, 2 x 2 points a cell), the assembly ~3 of those: the points win while
+matrix (cubic splines, 2 x 2 points a cell), the assembly about three from the points: the points win while
 ``8 k <= s + 4`` (the rule of :func:`femgrid_mpm.mass.build_mass_model`; measured, docs/performance.md).
 The nodes are lumped mass's (empty ones out); supports hold their degrees of freedom at zero and
 out of ``M``'s rows.  Row sums must be positive: non-negative bases only.
