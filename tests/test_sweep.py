@@ -378,3 +378,51 @@ def test_a_direct_consistent_solve_has_no_cg_iterations():
     assert row(Planned, summary, 1)["cg_iterations"] == ""
     summary["consistent_mass"]["cg_iterations"] = 25
     assert row(Planned, summary, 1)["cg_iterations"] == "2.5"
+
+
+def test_runs_that_differ_only_in_keys_their_mass_does_not_read_run_once(tmp_path):
+    """Lumped mass reads neither ``mass_corrections`` nor ``mix``; the iterated mass no ``mix``;
+    consistent mass no ``mass_corrections``: 3 x 2 x 2 combinations are 2 + 2 + 1 distinct
+    scenes, each run once (the first of its kind) and labelled by the keys its mass reads."""
+    from femgrid_mpm.sweep import plan, read_sweep
+    from femgrid_mpm.sweep.report import method_of
+
+    path = sweep_file(tmp_path, '"solver.mass" = ["iterated", "consistent", "lumped"]\n'
+                                '"solver.mass_corrections" = [1, 2]\n"solver.mix" = [0, 0.5]', 0.1)
+    runs = plan(read_sweep(path), path)
+    kept = [(r.varied["solver.mass"], r.varied["solver.mass_corrections"], r.varied["solver.mix"]) for r in runs]
+    assert kept == [("iterated", 1, 0), ("iterated", 2, 0), ("consistent", 1, 0), ("consistent", 1, 0.5),
+                    ("lumped", 1, 0)]
+    varied = list(read_sweep(path).vary)
+    labels = [method_of({"basis": "q1", "mass": r.varied["solver.mass"], **r.varied}, varied) for r in runs]
+    assert labels == ["q1 iterated solver.mass_corrections=1", "q1 iterated solver.mass_corrections=2",
+                      "q1 consistent solver.mix=0", "q1 consistent solver.mix=0.5", "q1 lumped"]
+
+
+CHANGED = {"mass_corrections": 5, "weak_fraction": 0.3, "cg_tolerance": 1e-2, "linear_solver": "cg",
+           "consistent_fallback": "blend", "blend": 0.7, "weak_ratio": 0.6, "weak_mix": 0.9, "mix": 0.5}
+
+
+@pytest.mark.parametrize("mass", ["lumped", "hrz", "iterated", "consistent"])
+def test_a_mass_runs_the_same_whatever_the_keys_it_does_not_read(mass):
+    """The declaration the sweep's plan and labels rest on (``femgrid_mpm.mass.OWN_KEYS``),
+    against the runs: the bar's points after 40 steps (q1, consistent mass's weak nodes and
+    iterated mass's corrections both at work) with every solver key ``mass`` does not read
+    changed from its default equal the default run's bit for bit."""
+    import numpy as np
+
+    from femgrid_mpm.mass import OWN_KEYS, reads
+    from femgrid_mpm.solver import Simulation
+
+    from helpers import bundled_variant
+
+    assert set(CHANGED) == set(OWN_KEYS)
+    others = {f"solver.{key}": value for key, value in CHANGED.items() if not reads(mass, key)}
+    assert others
+    states = []
+    for overrides in ({}, others):
+        simulation = Simulation(bundled_variant("vibrating_bar", "q1", mass, **{"time.dt": 1e-3, **overrides}))
+        for _ in range(40):
+            simulation.advance()
+        states.append((simulation.particles.x.copy(), simulation.particles.v.copy()))
+    assert np.array_equal(states[0][0], states[1][0]) and np.array_equal(states[0][1], states[1][1])

@@ -42,7 +42,7 @@ from .scale import CellMasses
 from .weak_rows import interior_ratio
 
 __all__ = [
-    "Assembly", "CellMasses", "ConsistentMass", "ConstrainedMass", "NodeConstraint", "DIRECT_LIMIT", "FieldLumpedMass", "HrzMass", "Inertia", "IteratedMass", "LumpedMass", "MassModel",
+    "Assembly", "CellMasses", "OWN_KEYS", "reads", "ConsistentMass", "ConstrainedMass", "NodeConstraint", "DIRECT_LIMIT", "FieldLumpedMass", "HrzMass", "Inertia", "IteratedMass", "LumpedMass", "MassModel",
     "NodalSums", "SingularMassError", "build_mass_model", "positive_weights", "tensor_preconditioner",
 ]
 
@@ -80,6 +80,20 @@ def build_mass_model(solver, grid, cells: CellMasses, per_body: bool = False,
     if per_body:
         return FieldLumpedMass(grid.n_nodes, cells)
     return _unconstrained(solver, grid, cells, time_step, fixed)
+
+
+#: the solver keys that only these mass kinds read (:func:`_unconstrained`): a scene of
+#: another kind runs the same whatever their value, and a sweep runs it once and leaves
+#: them out of its label
+OWN_KEYS = {"mass_corrections": ("iterated",),
+            **{key: ("consistent",) for key in ("weak_fraction", "cg_tolerance", "linear_solver",
+                                                  "consistent_fallback", "blend", "weak_ratio", "weak_mix", "mix")}}
+
+
+def reads(mass: str, key: str) -> bool:
+    """Whether a scene with ``solver.mass = mass`` reads ``solver.<key>`` (any key not in
+    :data:`OWN_KEYS` is read by every kind)."""
+    return mass in OWN_KEYS.get(key, (mass,))
 
 
 def _unconstrained(solver, grid, cells: CellMasses, time_step: float | None, fixed: np.ndarray | None = None,

@@ -17,6 +17,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..mass import reads
 from . import analysis, figures
 from .spec import SPACING_KEY, TIME_STEP_KEYS, ReportSpec, SweepError, read_sweep
 from .table import RUNS_FILE, read_runs
@@ -98,8 +99,10 @@ def settings(directory: Path) -> tuple[str, ReportSpec]:
 
 def method_of(row: dict, varied: list[str]) -> str:
     """A run's method: its basis and mass, with the values of the other keys varied
-    (not the spacing or the time step, the axes of the report)."""
-    others = [f"{key}={row[key]}" for key in varied if key not in METHOD_KEYS_SHOWN_APART]
+    (not the spacing or the time step, the axes of the report, nor a solver key its mass
+    does not read, :data:`femgrid_mpm.mass.OWN_KEYS`: lumped mass is not "mass_corrections=1")."""
+    others = [f"{key}={row[key]}" for key in varied if key not in METHOD_KEYS_SHOWN_APART
+              and not (key.startswith("solver.") and not reads(row["mass"], key.removeprefix("solver.")))]
     return " ".join([row["basis"], row["mass"]] + ([", ".join(others)] if others else []))
 
 
@@ -193,7 +196,7 @@ def answer(report: Report, rows: list[dict], varied: list[str], spec: ReportSpec
         if choice.runner_up is not None:
             other = rows[choice.runner_up]
             text += (f"; the next method, {methods[choice.runner_up]} at h = {number(other['spacing'])} m, "
-                     f"takes {choice.ratio:.3g}x as long")
+                     f"takes {choice.ratio:.2f}x as long")
         else:
             text += "; no other method reaches it"
         if choice.missing:

@@ -231,6 +231,7 @@ def plan(spec: SweepSpec, sweep_path) -> list[PlannedRun]:
     keys = list(spec.vary)
     combinations = [dict(zip(keys, values)) for values in itertools.product(*spec.vary.values())]
     combinations = [varied for varied in combinations if not skipped(spec, varied)]
+    combinations = distinct_runs(combinations, base.solver.mass)
     if not combinations:
         raise SweepError(f"{sweep_path}: skip: leaves no run")
     names = run_keys(combinations)
@@ -243,6 +244,29 @@ def plan(spec: SweepSpec, sweep_path) -> list[PlannedRun]:
             raise SweepError(f"{sweep_path}: vary: run {name}: {error}") from None
         runs.append(PlannedRun(name, varied, overrides, path, scene))
     return runs
+
+
+def distinct_runs(combinations: list[dict], mass: str) -> list[dict]:
+    """``combinations`` without those that differ from an earlier one only in solver keys
+    their mass does not read (:data:`femgrid_mpm.mass.OWN_KEYS`; ``mass`` the scene's where
+    ``solver.mass`` is not varied): they would run the same scene again.
+
+    >>> distinct_runs([{"solver.mass": m, "solver.mix": a} for m in ("consistent", "lumped") for a in (0.0, 0.5)],
+    ...               "lumped")
+    [{'solver.mass': 'consistent', 'solver.mix': 0.0}, {'solver.mass': 'consistent', 'solver.mix': 0.5}, \
+{'solver.mass': 'lumped', 'solver.mix': 0.0}]
+    """
+    from ..mass import reads
+
+    seen, kept = set(), []
+    for varied in combinations:
+        own = varied.get("solver.mass", mass)
+        read = tuple((key, normal_value(value)) for key, value in varied.items()
+                     if not (key.startswith("solver.") and not reads(own, key.removeprefix("solver."))))
+        if read not in seen:
+            seen.add(read)
+            kept.append(varied)
+    return kept
 
 
 def run_keys(combinations: list[dict]) -> list[str]:
