@@ -17,6 +17,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import pytest
@@ -275,13 +276,15 @@ def test_report_of_a_directory_without_runs(tmp_path, run_cli):
 
 def test_bundled_sweep_files_plan(run_cli):
     from femgrid_mpm.sweep import plan, read_sweep
-    from femgrid_mpm.sweep.spec import BUNDLED_SWEEPS
+    from femgrid_mpm.sweep.spec import BUNDLED_SWEEPS, MergedRunsWarning
 
     files = sorted(BUNDLED_SWEEPS.glob("*.toml"))
     assert files
     for path in files:
         spec = read_sweep(path)
-        runs = plan(spec, path)
+        with warnings.catch_warnings():  # their [[skip]] leaves no combination that would run again
+            warnings.simplefilter("error", MergedRunsWarning)
+            runs = plan(spec, path)
         product = math.prod(len(v) for v in spec.vary.values())
         assert len({run.key for run in runs}) == len(runs) == (product if not spec.skip else len(runs))
         assert len(runs) <= product
@@ -386,10 +389,12 @@ def test_runs_that_differ_only_in_keys_their_mass_does_not_read_run_once(tmp_pat
     scenes, each run once (the first of its kind) and labelled by the keys its mass reads."""
     from femgrid_mpm.sweep import plan, read_sweep
     from femgrid_mpm.sweep.report import method_of
+    from femgrid_mpm.sweep.spec import MergedRunsWarning
 
     path = sweep_file(tmp_path, '"solver.mass" = ["iterated", "consistent", "lumped"]\n'
                                 '"solver.mass_corrections" = [1, 2]\n"solver.mix" = [0, 0.5]', 0.1)
-    runs = plan(read_sweep(path), path)
+    with pytest.warns(MergedRunsWarning, match="12 combinations, 5 distinct runs"):
+        runs = plan(read_sweep(path), path)
     kept = [(r.varied["solver.mass"], r.varied["solver.mass_corrections"], r.varied["solver.mix"]) for r in runs]
     assert kept == [("iterated", 1, 0), ("iterated", 2, 0), ("consistent", 1, 0), ("consistent", 1, 0.5),
                     ("lumped", 1, 0)]
@@ -426,3 +431,27 @@ def test_a_mass_runs_the_same_whatever_the_keys_it_does_not_read(mass):
             simulation.advance()
         states.append((simulation.particles.x.copy(), simulation.particles.v.copy()))
     assert np.array_equal(states[0][0], states[1][0]) and np.array_equal(states[0][1], states[1][1])
+
+
+def test_a_runs_table_with_repeated_scenes_is_reported_once_per_scene(tmp_path):
+    """A runs.csv that holds lumped runs differing only in ``solver.mix`` (a sweep written before
+    such runs were merged): the report keeps the first of each, so the lumped line has one run per
+    spacing, its convergence order 1 from e = 0.2 h exactly, not a line doubling back."""
+    header = ["solver.mass", "solver.mix", "grid.spacing", *RESULT_COLUMNS, "critical_dt", "basis", "mass", "spacing",
+              "workers", "reason", "run"]
+    rows = []
+    for mass, mix, constant in (("consistent", "0", 0.1), ("consistent", "0.5", 0.15), ("lumped", "0", 0.2),
+                                ("lumped", "0.5", 0.2)):
+        for h in (0.5, 0.25, 0.125):
+            error = constant * h
+            rows.append([mass, mix, h, "completed", 100, 10, 10, 0.01, 1 / h, error, error, "", "", "", 0.1, "q1",
+                         mass, h, 1, "reached t = 1 s", f"{mass}-{mix}-{h}"])
+    with (tmp_path / "runs.csv").open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(header)
+        writer.writerows(rows)
+    (tmp_path / "sweep.toml").write_text('scene = "vibrating_bar"\n[report]\ntargets = [0.03]\n')
+    report = write_report(tmp_path).read_text()
+    assert report.startswith("# Sweep of vibrating_bar\n\n9 runs (9 completed")
+    assert "| q1 lumped | 0.5, 0.25, 0.125 | 1.00, 1.00 | 1.00 |" in report
+    assert "| q1 consistent solver.mix=0.5 | 0.5, 0.25, 0.125 | 1.00, 1.00 | 1.00 |" in report

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ..mass import reads
 from . import analysis, figures
-from .spec import SPACING_KEY, TIME_STEP_KEYS, ReportSpec, SweepError, read_sweep
+from .spec import SPACING_KEY, TIME_STEP_KEYS, ReportSpec, SweepError, read_sweep, read_values
 from .table import RUNS_FILE, read_runs
 
 REPORT_FILE, HTML_FILE = "report.md", "report.html"
@@ -106,6 +106,19 @@ def method_of(row: dict, varied: list[str]) -> str:
     return " ".join([row["basis"], row["mass"]] + ([", ".join(others)] if others else []))
 
 
+def distinct_rows(varied: list[str], rows: list[dict]) -> list[dict]:
+    """``rows`` without those that repeat an earlier one's run: the same values of every varied
+    key its mass reads (:func:`.spec.read_values`; a sweep plans such runs once, a ``runs.csv``
+    written before it did may hold them all)."""
+    seen, kept = set(), []
+    for row in rows:
+        read = read_values({key: row[key] for key in varied}, row["mass"])
+        if read not in seen:
+            seen.add(read)
+            kept.append(row)
+    return kept
+
+
 def step_setting(row: dict, varied: list[str]) -> str:
     """The time-step keys varied, as text (empty when the sweep does not vary them)."""
     return ", ".join(f"{key}={row[key]}" for key in varied if key in TIME_STEP_KEYS)
@@ -130,6 +143,7 @@ def write_report(directory) -> Path:
     directory = Path(directory)
     title, spec = settings(directory)
     varied, rows = read_runs(directory / RUNS_FILE)
+    rows = distinct_rows(varied, rows)
     report = Report()
     report.heading(title, 1)
     compose(report, directory, varied, rows, spec)

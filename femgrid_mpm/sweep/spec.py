@@ -29,6 +29,7 @@ import itertools
 import json
 import math
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -231,7 +232,15 @@ def plan(spec: SweepSpec, sweep_path) -> list[PlannedRun]:
     keys = list(spec.vary)
     combinations = [dict(zip(keys, values)) for values in itertools.product(*spec.vary.values())]
     combinations = [varied for varied in combinations if not skipped(spec, varied)]
-    combinations = distinct_runs(combinations, base.solver.mass)
+    distinct = distinct_runs(combinations, base.solver.mass)
+    if len(distinct) < len(combinations):
+        from ..mass import OWN_KEYS
+
+        keys = ", ".join(key for key in spec.vary if key.removeprefix("solver.") in OWN_KEYS)
+        warnings.warn(f"{sweep_path}: {len(combinations)} combinations, {len(distinct)} distinct run{'s' if len(distinct) > 1 else ''}: the others "
+                      f"differ from an earlier one only in keys their mass does not read ({keys}), and would run "
+                      f"the same scene again", MergedRunsWarning, stacklevel=2)
+    combinations = distinct
     if not combinations:
         raise SweepError(f"{sweep_path}: skip: leaves no run")
     names = run_keys(combinations)
@@ -246,6 +255,19 @@ def plan(spec: SweepSpec, sweep_path) -> list[PlannedRun]:
     return runs
 
 
+class MergedRunsWarning(UserWarning):
+    """Combinations of a sweep that would run the same scene as an earlier one (:func:`distinct_runs`)."""
+
+
+def read_values(varied: dict, mass: str) -> tuple:
+    """The keys and values of ``varied`` that a run of ``mass`` reads: all but the solver keys
+    of another mass kind (:data:`femgrid_mpm.mass.OWN_KEYS`), the values as the scene reads them."""
+    from ..mass import reads
+
+    return tuple((key, normal_value(value)) for key, value in varied.items()
+                 if not (key.startswith("solver.") and not reads(mass, key.removeprefix("solver."))))
+
+
 def distinct_runs(combinations: list[dict], mass: str) -> list[dict]:
     """``combinations`` without those that differ from an earlier one only in solver keys
     their mass does not read (:data:`femgrid_mpm.mass.OWN_KEYS`; ``mass`` the scene's where
@@ -256,13 +278,9 @@ def distinct_runs(combinations: list[dict], mass: str) -> list[dict]:
     [{'solver.mass': 'consistent', 'solver.mix': 0.0}, {'solver.mass': 'consistent', 'solver.mix': 0.5}, \
 {'solver.mass': 'lumped', 'solver.mix': 0.0}]
     """
-    from ..mass import reads
-
     seen, kept = set(), []
     for varied in combinations:
-        own = varied.get("solver.mass", mass)
-        read = tuple((key, normal_value(value)) for key, value in varied.items()
-                     if not (key.startswith("solver.") and not reads(own, key.removeprefix("solver."))))
+        read = read_values(varied, varied.get("solver.mass", mass))
         if read not in seen:
             seen.add(read)
             kept.append(varied)
