@@ -133,6 +133,8 @@ def factored_work(layout: "SymbolicLDL", solves: int) -> float:
     factorization and ``solves`` solves (:data:`FACTOR_SHARE`, :data:`SOLVE_SHARE`)."""
     n = len(layout.order)
     entries = 2 * len(layout.upper_rows) + n  # the free rows' stored entries (the strict upper half twice)
+    if entries == 0:  # a component the supports hold at every node: nothing to factor or solve
+        return 0.0
     return (FACTOR_SHARE * layout.work * layout.factor_entries / (2 * entries)
             + solves * SOLVE_SHARE * (2 * layout.factor_entries + n) / entries)
 
