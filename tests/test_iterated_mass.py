@@ -125,3 +125,20 @@ def test_signed_bases_are_refused_with_a_clear_message():
     for basis in ("q2", "serendipity"):
         with pytest.raises(SceneError, match="'iterated' divides by the row sums"):
             bundled_variant("vibrating_bar", basis, "iterated")
+
+
+def test_mirrored_ghosts_are_refused_naming_the_key(tmp_path, capsys):
+    """Supports with mirrored ghosts on a basis with ghost columns: one line naming
+    ``supports.ghosts`` and the iterated mass, exit code 2, nothing written; on q1 (no ghost
+    column, the support fixes its nodes) the same scene runs."""
+    from femgrid_mpm import cli
+    from femgrid_mpm.scene import BUNDLED_SCENES
+
+    scene = BUNDLED_SCENES / "manufactured_rollers.toml"
+    code = cli.main(["run", str(scene), "--mass", "iterated", "--set", "time.end=0.01", "--out", str(tmp_path / "a")])
+    error = capsys.readouterr().err
+    assert code == 2 and not (tmp_path / "a").exists()
+    assert error.count("\n") == 1 and "supports.ghosts: 'mirrored'" in error and 'solver.mass = "iterated"' in error
+    code = cli.main(["run", str(scene), "--mass", "iterated", "--basis", "q1", "--set", "time.end=0.01",
+                     "--no-progress", "--out", str(tmp_path / "b")])
+    assert code == 0

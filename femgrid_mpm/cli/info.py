@@ -22,7 +22,7 @@ def info(args) -> int:
         "title": scene.title,
         "scene": args.scene + (" (with " + ", ".join(f"{k} = {v!r}" for k, v in overrides.items()) + ")" if overrides else ""),
         "basis": grid.basis,
-        "mass": scene.solver.mass + (f" ({scene.solver.mass_corrections} corrections)" if scene.solver.mass == "iterated" else ""),
+        "mass": scene.solver.mass + (f" ({scene.solver.mass_corrections} correction{'s' if scene.solver.mass_corrections > 1 else ''})" if scene.solver.mass == "iterated" else ""),
         "grid": f"[{grid.lower[0]:g}, {grid.lower[1]:g}] to [{simulation.grid.upper[0]:g}, {simulation.grid.upper[1]:g}], spacing {grid.spacing:g} m",
         "points": f"{simulation.particles.n} ({bodies})",
         "nodes": str(simulation.grid.n_nodes),

@@ -72,8 +72,9 @@ def build_mass_model(solver, grid, cells: CellMasses, per_body: bool = False,
         if per_body:
             raise ValueError("supports with ghosts = 'mirrored' need one shared velocity field (not frictional contact)")
         if solver.mass == "iterated":
-            raise ValueError("supports with ghosts = 'mirrored' solve the folded consistent mass exactly: "
-                             "use mass = 'consistent' or 'lumped' with them, not 'iterated'")
+            raise ValueError("supports.ghosts: 'mirrored' folds the ghost nodes into their images (the mass T.T M T), "
+                             "which solver.mass = \"iterated\" does not implement: use ghosts = \"fixed\" with it, or "
+                             "solver.mass = \"consistent\" or \"lumped\"")
         # mirrored ghost nodes are tied to interior ones: their rows are not weak once folded
         inner = _unconstrained(solver, grid, cells, time_step, solves=False, weak_ratio=0.0)
         return ConstrainedMass(inner, constraint, diagonal=not isinstance(inner, ConsistentMass))
