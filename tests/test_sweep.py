@@ -86,6 +86,16 @@ def test_pareto_front_and_cheapest_for_a_target():
     assert analysis.cheapest_for_target(methods, costs, errors, 1e-3).best is None
 
 
+def report_of(directory: Path, header: list, rows: list, targets: str) -> str:
+    """The report of a runs.csv of these rows, the bar's sweep with these target errors."""
+    with (directory / "runs.csv").open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(header)
+        writer.writerows(rows)
+    (directory / "sweep.toml").write_text(f'scene = "vibrating_bar"\n[report]\ntargets = {targets}\n')
+    return write_report(directory).read_text()
+
+
 def test_report_of_a_runs_table(tmp_path):
     """A runs.csv of two methods, e = C h^p exactly, and its report: orders, front, answer."""
     header = ["grid.basis", "grid.spacing", *RESULT_COLUMNS, "critical_dt", "basis", "mass", "spacing", "workers",
@@ -97,12 +107,7 @@ def test_report_of_a_runs_table(tmp_path):
             wall = seconds / h  # cost grows as the spacing shrinks
             rows.append([basis, h, "completed", 100, 10, 10, 0.01, wall, error, error, "", "", "", 0.1, basis,
                          "lumped", h, 1, "reached t = 1 s", f"{basis}-{h}"])
-    with (tmp_path / "runs.csv").open("w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(header)
-        writer.writerows(rows)
-    (tmp_path / "sweep.toml").write_text('scene = "vibrating_bar"\n[report]\ntargets = [0.03, 0.0001]\n')
-    report = write_report(tmp_path).read_text()
+    report = report_of(tmp_path, header, rows, "[0.03, 0.0001]")
     # the orders: 1 and 2 per pair and fitted; Richardson's limit 0 (printed as 0 to 3 digits)
     assert "| q1 lumped | 0.5, 0.25, 0.125 | 1.00, 1.00 | 1.00 | 1.00 |" in report
     assert "| bspline3 lumped | 0.5, 0.25, 0.125 | 2.00, 2.00 | 2.00 | 2.00 |" in report
@@ -446,12 +451,7 @@ def test_a_runs_table_with_repeated_scenes_is_reported_once_per_scene(tmp_path):
             error = constant * h
             rows.append([mass, mix, h, "completed", 100, 10, 10, 0.01, 1 / h, error, error, "", "", "", 0.1, "q1",
                          mass, h, 1, "reached t = 1 s", f"{mass}-{mix}-{h}"])
-    with (tmp_path / "runs.csv").open("w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(header)
-        writer.writerows(rows)
-    (tmp_path / "sweep.toml").write_text('scene = "vibrating_bar"\n[report]\ntargets = [0.03]\n')
-    report = write_report(tmp_path).read_text()
+    report = report_of(tmp_path, header, rows, "[0.03]")
     assert report.startswith("# Sweep of vibrating_bar\n\n9 runs (9 completed")
     assert "| q1 lumped | 0.5, 0.25, 0.125 | 1.00, 1.00 | 1.00 |" in report
     assert "| q1 consistent solver.mix=0.5 | 0.5, 0.25, 0.125 | 1.00, 1.00 | 1.00 |" in report
