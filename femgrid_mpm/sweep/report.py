@@ -17,7 +17,6 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..mass import reads
 from . import analysis, figures
 from .spec import SPACING_KEY, TIME_STEP_KEYS, ReportSpec, SweepError, read_sweep, read_values
 from .table import RUNS_FILE, read_runs
@@ -101,8 +100,8 @@ def method_of(row: dict, varied: list[str]) -> str:
     """A run's method: its basis and mass, with the values of the other keys varied
     (not the spacing or the time step, the axes of the report, nor a solver key its mass
     does not read, :data:`femgrid_mpm.mass.OWN_KEYS`: lumped mass is not "mass_corrections=1")."""
-    others = [f"{key}={row[key]}" for key in varied if key not in METHOD_KEYS_SHOWN_APART
-              and not (key.startswith("solver.") and not reads(row["mass"], key.removeprefix("solver.")))]
+    shown = {key: row[key] for key in varied if key not in METHOD_KEYS_SHOWN_APART}
+    others = [f"{key}={row[key]}" for key, _ in read_values(shown, row["mass"])]
     return " ".join([row["basis"], row["mass"]] + ([", ".join(others)] if others else []))
 
 

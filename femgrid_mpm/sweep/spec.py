@@ -236,10 +236,11 @@ def plan(spec: SweepSpec, sweep_path) -> list[PlannedRun]:
     if len(distinct) < len(combinations):
         from ..mass import OWN_KEYS
 
-        keys = ", ".join(key for key in spec.vary if key.removeprefix("solver.") in OWN_KEYS)
-        warnings.warn(f"{sweep_path}: {len(combinations)} combinations, {len(distinct)} distinct run{'s' if len(distinct) > 1 else ''}: the others "
-                      f"differ from an earlier one only in keys their mass does not read ({keys}), and would run "
-                      f"the same scene again", MergedRunsWarning, stacklevel=2)
+        merged = ", ".join(key for key in spec.vary if key.removeprefix("solver.") in OWN_KEYS)
+        counted = f"{len(distinct)} distinct run{'s' if len(distinct) > 1 else ''}"
+        warnings.warn(f"{sweep_path}: {len(combinations)} combinations, {counted}: the others differ from an earlier "
+                      f"one only in keys their mass does not read ({merged}), and would run the same scene again",
+                      MergedRunsWarning, stacklevel=2)
     combinations = distinct
     if not combinations:
         raise SweepError(f"{sweep_path}: skip: leaves no run")
