@@ -455,3 +455,26 @@ def test_a_runs_table_with_repeated_scenes_is_reported_once_per_scene(tmp_path):
     assert report.startswith("# Sweep of vibrating_bar\n\n9 runs (9 completed")
     assert "| q1 lumped | 0.5, 0.25, 0.125 | 1.00, 1.00 | 1.00 |" in report
     assert "| q1 consistent solver.mix=0.5 | 0.5, 0.25, 0.125 | 1.00, 1.00 | 1.00 |" in report
+
+
+def test_a_line_with_an_error_of_zero_has_no_order_and_the_report_is_written(tmp_path):
+    """A body at rest against a reference at rest: error_max exactly 0 at every spacing (was a
+    math domain error, exit 2, no report.md).  The report names the line as having no order and
+    draws nothing of it on the log axes (no matplotlib warning)."""
+    header = ["grid.spacing", *RESULT_COLUMNS, "critical_dt", "basis", "mass", "spacing", "workers", "reason", "run"]
+    rows = [[h, "completed", 100, 10, 10, 0.01, 1 / h, 0.0, 0.0, "", "", "", 0.1, "q1", "lumped", h, 1,
+             "reached t = 1 s", f"r-{h}"] for h in (1.0, 0.5, 0.25)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        report = report_of(tmp_path, header, rows, "[0.03]")
+    assert "q1 lumped: an error of 0 at some spacing, no order of convergence." in report
+    assert "For 3%, the cheapest is q1 lumped at h = 1 m" in report
+
+
+def test_a_list_index_of_other_digits_is_left_to_the_scene():
+    """int() refuses "²" (which str.isdigit takes) and more than 4300 digits: such a part is no index."""
+    from femgrid_mpm.sweep.spec import normal_key
+
+    assert normal_key("bodies.00.name") == "bodies.0.name"
+    assert normal_key("bodies.².name") == "bodies.².name"
+    assert normal_key("bodies." + "9" * 5000 + ".x") == "bodies." + "9" * 5000 + ".x"

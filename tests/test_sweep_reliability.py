@@ -7,8 +7,10 @@ traceback, a false message); the reference is the file's bytes before and after,
 exit code and the one line of the contract.
 """
 
+import json
 import os
 import re
+import shutil
 import socket
 import subprocess
 import sys
@@ -263,3 +265,23 @@ def test_a_damaged_runs_csv_is_one_line_naming_file_and_line(finished_sweep, tmp
     copy = damaged(out, tmp_path, change)
     one_line_error(*run_cli(["report", copy]), str(copy / "runs.csv"), problem)
     assert not (copy / "report.md").exists()
+
+
+@pytest.mark.parametrize("field, value", [("reference", [1]), ("wall_time", "fast"), ("steps", True),
+                                          ("consistent_mass", {"cg_iterations": "many"}), ("reason", 3)])
+def test_a_damaged_summary_of_a_finished_run_is_computed_again(finished_sweep, tmp_path, field, value):
+    """A finished run whose summary.json holds a field of the wrong type (edited by hand): not
+    reused (its row was a traceback, or a runs.csv the report then refused), so computed again."""
+    from femgrid_mpm.sweep.runner import MARKER_FILE, finished_summary
+    from femgrid_mpm.sweep.spec import plan, read_sweep
+
+    sweep, out, _ = finished_sweep
+    planned = plan(read_sweep(sweep), sweep)[0]
+    digest = json.loads((out / "runs" / planned.key / MARKER_FILE).read_text())["digest"]
+    copy = tmp_path / planned.key
+    shutil.copytree(out / "runs" / planned.key, copy)
+    assert finished_summary(copy, digest) is not None
+    summary = json.loads((copy / "summary.json").read_text())
+    summary[field] = value
+    (copy / "summary.json").write_text(json.dumps(summary))
+    assert finished_summary(copy, digest) is None

@@ -80,7 +80,10 @@ def richardson(spacings, errors) -> Richardson | None:
     ratio = (e1 - e2) / (e2 - e3)
 
     def mismatch(p: float) -> float:
-        return (h1**p - h2**p) / (h2**p - h3**p) - ratio
+        try:
+            return (h1**p - h2**p) / (h2**p - h3**p) - ratio
+        except (OverflowError, ZeroDivisionError):  # spacings far from 1 (1e100) at a high order
+            return math.inf
 
     low, high = 1e-6, 1.0
     if mismatch(low) >= 0:

@@ -8,10 +8,13 @@ the data, sized and lettered to be read in print.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, NullFormatter
+
+from ..output import atomic_write
 
 MARKERS = "osD^v<>pPhX*"
 LINE_STYLES = ("-", "--", "-.", ":")
@@ -37,6 +40,8 @@ def _lines(axes, series) -> None:
     masses = list(dict.fromkeys(group[1:] for *_, group in series))
     for label, xs, ys, group in series:
         basis, mass = bases.index(group[0]), masses.index(group[1:])
+        shown = [(x, y) for x, y in zip(xs, ys) if x > 0 and y > 0]  # log axes: an error of 0 is not drawn
+        xs, ys = [x for x, _ in shown], [y for _, y in shown]
         axes.plot(xs, ys, marker=MARKERS[mass % len(MARKERS)], linestyle=LINE_STYLES[mass % len(LINE_STYLES)],
                   markersize=5, linewidth=1.2, label=label, color=f"C{basis % 10}")
 
@@ -54,7 +59,9 @@ def _save(figure, axes, path: Path) -> Path:
     if axes.get_legend_handles_labels()[0]:
         axes.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.02, 0.5), frameon=False)
     figure.tight_layout()
-    figure.savefig(path)
+    image = io.BytesIO()
+    figure.savefig(image, format="png")
+    atomic_write(path, image.getvalue())  # a report cut short keeps the figure it had
     return path
 
 
@@ -63,7 +70,8 @@ def work_precision(series, front, path: Path) -> Path:
     Pareto front's ``(costs, errors)``, drawn as a staircase."""
     figure, axes = _axes("Work and precision", "wall time of the run (s)", ERROR_LABEL)
     _lines(axes, series)
-    costs, errors = front
+    shown = [(c, e) for c, e in zip(*front) if c > 0 and e > 0]  # log axes, as the lines
+    costs, errors = [c for c, _ in shown], [e for _, e in shown]
     if costs:
         axes.step(costs, errors, where="post", color="black", linestyle="--", linewidth=1.0, label="Pareto front",
                   zorder=0)
@@ -76,7 +84,7 @@ def convergence(series, path: Path, slopes=(1, 2, 3, 4)) -> Path:
     _lines(axes, series)
     spacings = sorted({h for _, xs, _, _ in series for h in xs})
     errors = [e for _, _, ys, _ in series for e in ys if e > 0]
-    if len(spacings) >= 2 and errors:
+    if len(spacings) >= 2 and errors and min(errors) / 4 > 0:  # guides below the finest error (not a subnormal)
         fine, coarse = spacings[0], spacings[-1]
         low, top = min(errors), max(errors)
         for order in slopes:  # from below the finest error, rising with the slope h^p

@@ -256,7 +256,14 @@ def work_precision(report: Report, directory: Path, rows, varied, error) -> None
 def convergence(report: Report, directory: Path, rows, varied, error) -> None:
     lines = {label: g for label, g in lines_over(rows, varied, "spacing", lambda r: step_setting(r, varied)).items()
              if len({r["spacing"] for r in g}) >= 2 and len({r["spacing"] for r in g}) == len(g)}
+    # an order is a ratio of logarithms: a line with an error of exactly 0 (a motion the grid holds
+    # exactly) has none, and is named instead
+    exact = [label for label, g in lines.items() if any(r[error] <= 0 for r in g)]
+    lines = {label: g for label, g in lines.items() if label not in exact}
     if not lines:
+        if exact:
+            report.heading("Convergence with the spacing")
+            report.paragraph(f"{', '.join(exact)}: an error of 0 at some spacing, no order of convergence.")
         return
     figures.convergence([(label, [r["spacing"] for r in g], [r[error] for r in g], group_of(label, g))
                          for label, g in lines.items()],
@@ -281,7 +288,8 @@ def convergence(report: Report, directory: Path, rows, varied, error) -> None:
     report.paragraph("The order per pair is log(e1/e2)/log(h1/h2) of successive spacings; the fitted order the "
                      "least-squares slope of log e against log h; Richardson's estimate fits e = e0 + C h^p through "
                      "the three finest spacings, e0 the error the spacing does not control."
-                     + (" " + " ".join(remarks) if remarks else ""))
+                     + (" " + " ".join(remarks) if remarks else "")
+                     + (f" {', '.join(exact)}: an error of 0 at some spacing, no order." if exact else ""))
 
 
 def time_steps(report: Report, directory: Path, rows, varied, error) -> None:

@@ -111,10 +111,26 @@ def finished_summary(directory: Path, digest: str) -> dict | None:
         return None
     if not isinstance(marker, dict) or not isinstance(summary, dict) or marker.get("digest") != digest:
         return None
-    if summary.get("status") not in ("completed", "stopped"):
+    if summary.get("status") not in ("completed", "stopped") or not _readable(summary):
         return None
     summary["workers"] = marker.get("workers")
     return summary
+
+
+def _readable(summary: dict) -> bool:
+    """Whether the fields a row takes from ``summary`` (:func:`.table.row`) have their types: a
+    summary edited or damaged by hand is computed again, not written into ``runs.csv``."""
+    def number(value) -> bool:
+        return value is None or (isinstance(value, (int, float)) and not isinstance(value, bool))
+
+    reference, consistent = summary.get("reference"), summary.get("consistent_mass")
+    return (all(number(summary.get(key)) for key in ("steps", "points", "nodes", "dt", "wall_time", "energy_drift",
+                                                     "critical_dt"))
+            and (reference is None or (isinstance(reference, dict)
+                                       and all(number(reference.get(key)) for key in ("error_end", "error_max",
+                                                                                      "period_error"))))
+            and (consistent is None or (isinstance(consistent, dict) and number(consistent.get("cg_iterations"))))
+            and isinstance(summary.get("reason", ""), str))
 
 
 def compute_run(scene_file: str, overrides: dict, directory: str, digest: str, workers: int) -> dict:

@@ -168,7 +168,9 @@ def skipped(spec: SweepSpec, varied: dict) -> bool:
 
 def normal_key(key: str) -> str:
     """A dotted key as the scene reads it: list indices as numbers (``bodies.00.x`` is ``bodies.0.x``)."""
-    return ".".join(str(int(part)) if part.isdigit() else part for part in key.split("."))
+    # ASCII digits only (int() refuses "²", which isdigit() takes), and no more than int() converts
+    return ".".join(str(int(part)) if part.isascii() and part.isdigit() and len(part) < 4000 else part
+                    for part in key.split("."))
 
 
 def normal_value(value: Scalar) -> tuple:
