@@ -36,6 +36,16 @@ def one_line_error(code, out, err, *parts):
 # -- inputs are never outputs ---------------------------------------------------------
 
 
+@pytest.mark.parametrize("name", ["runs.csv", "report.md", "work_precision.png"])
+def test_a_directory_where_an_output_goes_is_refused_before_any_run(tmp_path, run_cli, name):
+    """Old: the runs were computed, then writing the report failed with exit 1."""
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scene = "{VIBRATING_BAR}"\n[vary]\n"grid.spacing" = [0.5]\n[set]\n"time.end" = 0.01\n')
+    (tmp_path / "out" / name).mkdir(parents=True)
+    one_line_error(*run_cli(["sweep", sweep, "--out", tmp_path / "out", "--workers", "1"]), f"{name}: is a directory")
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [name]
+
+
 @pytest.mark.parametrize("name", ["runs.csv", "report.md", "report.html", "sweep.toml", "cost.png"])
 def test_a_sweep_file_named_like_an_output_is_refused(tmp_path, run_cli, name):
     (tmp_path / "bar.toml").write_bytes(VIBRATING_BAR.read_bytes())
@@ -256,6 +266,8 @@ def replaced(column: str, value: str):
     (replaced("error_max", "inf"), "line 2: error_max: must be finite in a completed run"),
     (replaced("steps", "2.5"), "line 2: steps: must be a whole number"),
     (replaced("status", "done"), "line 2: status: 'done' is not one of"),
+    (lambda lines: "\n".join([lines[0].replace("grid.spacing", "spacing", 1), *lines[1:]]).encode() + b"\n",
+     "the column 'spacing' twice"),
 ])
 def test_a_damaged_runs_csv_is_one_line_naming_file_and_line(finished_sweep, tmp_path, run_cli, change, problem):
     """Old: a row cut short gave exit 0 and a false 'the scene declares no [reference]';

@@ -92,6 +92,7 @@ def refuse_inputs_as_outputs(out: Path, inputs: dict[str, Path]) -> None:
     from ..sweep.runner import RUNS_DIRECTORY
 
     written = [out / name for name in (RUNS_FILE, REPORT_FILE, HTML_FILE, SWEEP_COPY, *FIGURES.values())]
+    refuse_directories(written)
     for what, source in inputs.items():
         for path in written:
             if _same_file(source, path):
@@ -120,6 +121,14 @@ def refuse_inputs_as_outputs(out: Path, inputs: dict[str, Path]) -> None:
                                "replaces runs and removes their temporaries; give another --out directory")
 
 
+def refuse_directories(written: list[Path]) -> None:
+    """Raise :class:`BadInput` if a directory stands where a file is to be written (found before any
+    run is computed, not when the report is written after them)."""
+    for path in written:
+        if path.is_dir() and not path.is_symlink():
+            raise BadInput(f"{path}: is a directory, where a file is to be written; move it or give another directory")
+
+
 def writable(out: Path) -> None:
     """Raise :class:`BadInput` unless ``out``, or the nearest folder above it that exists, can be written
     (checked without writing: a sweep writes nothing before its cluster is reached)."""
@@ -134,9 +143,12 @@ def report(args) -> int:
     """Write ``DIR/report.md``, ``report.html`` and the figures from ``DIR/runs.csv``."""
     from ..sweep import RUNS_FILE
 
+    from ..sweep.report import FIGURES, HTML_FILE, REPORT_FILE
+
     directory = Path(args.directory)
     if not (directory / RUNS_FILE).is_file():
         raise BadInput(f"{directory}: has no {RUNS_FILE} (the --out directory of femgrid-mpm sweep)")
+    refuse_directories([directory / name for name in (REPORT_FILE, HTML_FILE, *FIGURES.values())])
     return write_report(directory)
 
 

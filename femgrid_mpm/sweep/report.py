@@ -172,8 +172,9 @@ def compose(report: Report, directory: Path, varied: list[str], rows: list[dict]
     if not ended:
         report.paragraph("No run finished: there is no error and no cost to compare.")
     elif not any(r[error] is not None for r in ended):
-        report.paragraph(f"No run has a {error}: the scene declares no [reference], so there is nothing to compare "
-                         "against; below is what the runs cost.")
+        report.paragraph(f"No run has a {error} (the scene declares no [reference], or no run recorded one: they "
+                         "stopped at their first step), so there is nothing to compare against; below is what the runs "
+                         "cost.")
     elif not measured:
         report.paragraph(f"No finished run has a finite {error} and a wall time above 0: there is nothing to compare; "
                          "below is what the runs cost.")

@@ -125,6 +125,9 @@ def read_runs(path: Path) -> tuple[list[str], list[dict]]:
         if "status" not in header or any(column not in header for column in RESULT_COLUMNS + DESCRIPTION_COLUMNS):
             shown = ", ".join(header)[:200] or "none"
             raise ValueError(f"{path}: not a sweep's runs.csv (its columns: {shown})")
+        twice = next((column for column in header if header.count(column) > 1), None)
+        if twice is not None:  # a varied key named like a result column: the report would read the wrong one
+            raise ValueError(f"{path}: not a sweep's runs.csv (the column {twice!r} twice)")
         varied = header[: header.index("status")]
         rows = [parsed_row(path, reader.line_num, header, record) for record in reader if record]
     except csv.Error as error:
