@@ -259,6 +259,7 @@ def test_a_changed_scene_is_run_again(tmp_path, run_cli):
     ('scene = "vibrating_bar"\n[vary]\n"time.end" = [1.0]\n[set]\n"time.end" = 2.0\n', 'set."time.end"'),
     ('scene = "vibrating_bar"\n[set]\n"time.dt" = -1.0\n', "time.dt"),
     ('scene = "vibrating_bar"\n[report]\nerror = "error_min"\n', "report.error"),
+    ('scene = "vibrating_bar"\n[report]\ntargets = [inf]\n', "report.targets[0]"),
     ('scene = "vibrating_bar"\n[vary\n', "not valid TOML"),
     ('[vary]\n"grid.basis" = ["q1"]\n', "scene"),
     ('scene = "vibrating_bar"\n[vary]\n"grid.basis" = ["q1"]\n[[skip]]\n"grid.spacing" = 0.5\n', "skip[0]"),

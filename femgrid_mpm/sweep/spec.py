@@ -60,7 +60,7 @@ class ReportSpec(BaseModel):
 
     model_config = ConfigDict(extra="forbid", strict=True)
     error: Literal["error_max", "error_end"] = "error_max"
-    targets: Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=1)] = [1e-2, 1e-3, 1e-4]
+    targets: Annotated[list[Annotated[float, Field(gt=0, allow_inf_nan=False)]], Field(min_length=1)] = [1e-2, 1e-3, 1e-4]
 
 
 class SweepSpec(BaseModel):
