@@ -262,3 +262,25 @@ def test_bad_options_are_one_line(run, tmp_path, run_cli, monkeypatch, argv, wor
     shutil.copytree(run, copy)
     check_refused(run_cli, copy, [item.replace("OUT", str(tmp_path / "out")) for item in argv], words)
     assert not (tmp_path / "out").exists()
+
+
+def test_values_beyond_an_axis_are_left_out_and_no_points_refused(run, tmp_path, run_cli):
+    """Edited files (a run writes neither): energies of 1e308 and a stop at t = 10**400 made
+    matplotlib's axes overflow (tracebacks, exit 1); they are left out of the drawing.  A final
+    state of no points (a reduction over nothing, exit 1) is refused in one line."""
+    from femgrid_mpm.plotting.run_directory import frame_of
+
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    lines = (copy / "energy.csv").read_text().splitlines()
+    columns = len(lines[0].split(","))
+    (copy / "energy.csv").write_text("\n".join([*lines, ",".join(["1e308"] * columns), ",".join(["-1e308"] * columns)]) + "\n")
+    summary = json.loads((copy / "summary.json").read_text())
+    (copy / "summary.json").write_text(json.dumps({**summary, "status": "stopped", "stop": {"time": 10**400, "reason": "x"}}))
+    code, _, err = run_cli(["plot", copy, "--only", "energy", "--out", tmp_path / "energy.png"])
+    assert code == 0, err
+    assert (tmp_path / "energy.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(ValueError, match="0 positions"):
+        frame_of(0.0, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+    with pytest.raises(ValueError, match="5 velocities"):
+        frame_of(0.0, np.zeros((6, 3)), np.zeros((5, 3)), np.zeros((6, 3)), np.zeros((6, 3)), np.zeros(6))

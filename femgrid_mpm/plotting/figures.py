@@ -169,7 +169,8 @@ def energy_figure(run: RunDirectory, table: dict[str, np.ndarray]):
         axes.grid(True, color="0.9")
         axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
     stop = run.summary.get("stop")
-    if run.summary.get("status") == "stopped" and isinstance(stop, dict) and isinstance(stop.get("time"), (int, float)):
+    if (run.summary.get("status") == "stopped" and isinstance(stop, dict) and isinstance(stop.get("time"), (int, float))
+            and abs(stop["time"]) < 1e300):  # a number the axis can take (an edited 10**400 overflows)
         for axes in (top, bottom):
             axes.axvline(stop["time"], color="crimson", ls="--", lw=1)
         top.annotate(f"stopped: {stop.get('reason', '')}", (stop["time"], 1.0), xycoords=("data", "axes fraction"),

@@ -56,8 +56,12 @@ def _vectors(prefix: str, values: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def frame_of(time: float, x, v, x0, stress, body) -> Frame:
-    """A :class:`Frame` from the arrays a run writes (z components dropped)."""
+    """A :class:`Frame` from the arrays a run writes (z components dropped); ValueError (a damaged
+    file's, :class:`RunUnreadable` from its reader) for no points or arrays of other lengths."""
     x, v, x0, stress = (np.asarray(a, dtype=float)[:, :k] for a, k in ((x, 2), (v, 2), (x0, 2), (stress, 3)))
+    if len(x) == 0 or any(len(a) != len(x) for a in (v, x0, stress, np.asarray(body))):
+        raise ValueError(f"{len(x)} positions, {len(v)} velocities, {len(x0)} initial positions, {len(stress)} "
+                         f"stresses, {len(np.asarray(body))} body numbers: not the points of a run")
     fields = {**_vectors("velocity", v), **_vectors("displacement", x - x0),
               "stress_xx": stress[:, 0], "stress_yy": stress[:, 1], "stress_xy": stress[:, 2],
               "body": np.asarray(body, dtype=float)}
@@ -228,7 +232,10 @@ def _series_frame(time: float, file: Path) -> Frame:
             raise RunUnreadable(f"{file}: has no point data {name!r} of {n} points (not a particle file of femgrid-mpm run)")
     x = mesh.points[:, :2]
     stress = np.column_stack([data["stress_xx"], data["stress_yy"], data["stress_xy"]])
-    return frame_of(time, x, data["velocity"], x - data["displacement"][:, :2], stress, data["body"])
+    try:
+        return frame_of(time, x, data["velocity"], x - data["displacement"][:, :2], stress, data["body"])
+    except ValueError as error:
+        raise RunUnreadable(f"{file}: {error} (damaged?)") from None
 
 
 def energy_table(file: Path) -> dict[str, np.ndarray]:
@@ -246,4 +253,6 @@ def energy_table(file: Path) -> dict[str, np.ndarray]:
         except ValueError as error:
             raise RunUnreadable(f"{file}: line {number} is not a row of numbers (damaged?): {error}") from None
     table = np.array(rows, dtype=float).reshape(len(rows), len(columns))
+    # beyond 1e300 a value cannot be drawn (the axis' span overflows): left out like a NaN
+    table[np.abs(table) > 1e300] = np.nan
     return {name: table[:, index] for index, name in enumerate(columns)}
