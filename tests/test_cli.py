@@ -479,6 +479,13 @@ def test_energy_csv_rows_reach_the_file(tmp_path, flush_seconds):
         (["run", "{scene}", "--out", ""], "--out: is empty"),
         (["reproduce", "--out", ""], "--out: is empty"),
         (["reproduce", "--out", "{scene}/sub"], "cannot write there"),
+        # an empty file or directory to read: it was taken as the working directory
+        (["run", "", "--out", "{tmp}/o"], "argument SCENE.toml: is empty"),
+        (["info", ""], "argument SCENE.toml: is empty"),
+        (["resume", ""], "argument DIR: is empty"),
+        (["plot", ""], "argument DIR: is empty"),
+        (["sweep", "", "--out", "{tmp}/o"], "argument SWEEP.toml: is empty"),
+        (["report", ""], "argument DIR: is empty"),
     ],
 )
 def test_bad_arguments_are_one_line_exit_2(tmp_path, capsys, argv, words):

@@ -479,3 +479,16 @@ def test_a_list_index_of_other_digits_is_left_to_the_scene():
     assert normal_key("bodies.00.name") == "bodies.0.name"
     assert normal_key("bodies.².name") == "bodies.².name"
     assert normal_key("bodies." + "9" * 5000 + ".x") == "bodies." + "9" * 5000 + ".x"
+
+
+def test_varied_text_values_keep_their_difference_in_runs_csv():
+    """Values of a text key that differ only in their spaces or line breaks were written alike
+    (one line of single spaces) and read as one method by the report."""
+    from femgrid_mpm.sweep.table import value_text
+
+    values = ["a b", "a  b", "a\nb", " a b", '"a b"', "a\\nb", 0.5, 1, True, None]
+    cells = [value_text(value) for value in values]
+    assert len(set(cells)) == len(values)
+    assert all("\n" not in cell for cell in cells)
+    assert cells[0] == "a b" and cells[6:] == ["0.5", "1", "true", ""]
+    assert [json.loads(cell) for cell in cells[1:6]] == values[1:6]

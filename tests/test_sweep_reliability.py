@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from femgrid_mpm.sweep.runner import SweepLock, remove_stale
+from femgrid_mpm.sweep.directories import SweepLock, remove_stale
 
 ROOT = Path(__file__).parents[1]
 VIBRATING_BAR = ROOT / "scenes" / "vibrating_bar.toml"
@@ -186,6 +186,28 @@ def test_remove_stale_leaves_a_live_process_temporaries(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == [live.name]
 
 
+def test_a_file_where_a_run_directory_goes_is_replaced_and_gone(tmp_path):
+    """A stray file (or a link) at ``runs/<key>``: the finished run takes its place and no
+    ``.KEY.PID.old`` is left (its removal took directories only); one a killed sweep left is removed."""
+    from femgrid_mpm.sweep.directories import replace_directory
+
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    for name, make in (("q1-0.5", lambda path: path.write_text("stray")),
+                       ("q1-0.25", lambda path: path.symlink_to(tmp_path / "nowhere"))):
+        make(runs / name)
+        source = runs / f".{name}.{os.getpid()}.tmp"
+        source.mkdir()
+        (source / "summary.json").write_text("{}")
+        replace_directory(source, runs / name)
+        assert (runs / name / "summary.json").read_text() == "{}"
+    assert sorted(p.name for p in runs.iterdir()) == ["q1-0.25", "q1-0.5"]
+    finished = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    (runs / f".q2-0.5.{int(finished.stdout)}.old").write_text("left by a killed sweep")
+    remove_stale(runs)
+    assert sorted(p.name for p in runs.iterdir()) == ["q1-0.25", "q1-0.5"]
+
+
 # -- a finished sweep: Dask quiet, stdout failures, a damaged runs.csv ------------------
 
 
@@ -254,6 +276,16 @@ def replaced(column: str, value: str):
         cells[header.index(column)] = value
         return "\n".join([lines[0], ",".join(cells)]).encode() + b"\n"
     return change
+
+
+def test_a_runs_csv_saved_with_a_byte_order_mark_reads_as_without(finished_sweep, tmp_path):
+    """A spreadsheet's "UTF-8 with BOM": the mark was read as part of the first varied key's name."""
+    from femgrid_mpm.sweep.table import read_runs
+
+    _, out, _ = finished_sweep
+    copy = damaged(out, tmp_path, lambda lines: "\ufeff".encode() + "\n".join(lines).encode() + b"\n")
+    assert read_runs(copy / "runs.csv") == read_runs(out / "runs.csv")
+    assert read_runs(copy / "runs.csv")[0] == ["grid.spacing"]
 
 
 @pytest.mark.parametrize("change, problem", [

@@ -62,7 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, metavar="{run,resume,info,plot,reproduce,sweep,report}")
 
     def scene_arguments(command):
-        command.add_argument("scene", metavar="SCENE.toml", help="the scene file")
+        command.add_argument("scene", type=given_path, metavar="SCENE.toml", help="the scene file")
         command.add_argument("--basis", choices=list(BASES), help="override [grid] basis")
         command.add_argument("--mass", choices=["lumped", "consistent", "hrz", "iterated"], help="override [solver] mass")
         command.add_argument(
@@ -83,7 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write the whole state to DIR/checkpoint.npz every N steps, for femgrid-mpm resume")
 
     resume = commands.add_parser("resume", help="continue a run from the checkpoint in its output directory")
-    resume.add_argument("directory", metavar="DIR", help="the --out directory of a run with --checkpoint-every")
+    resume.add_argument("directory", type=given_path, metavar="DIR", help="the --out directory of a run with --checkpoint-every")
     resume.add_argument("--no-progress", action="store_true", help="no progress bar (it is shown only when stderr is a terminal)")
 
     info = commands.add_parser("info", help="check a scene and print what a run would do")
@@ -105,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     sweep = commands.add_parser("sweep", help="run a scene over the product of the values of some keys (a sweep file), "
                                 "on Dask, and write runs.csv and the report")
-    sweep.add_argument("sweep", metavar="SWEEP.toml", help="the sweep file")
+    sweep.add_argument("sweep", type=given_path, metavar="SWEEP.toml", help="the sweep file")
     sweep.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing; a rerun "
                        "into it computes only the runs missing)")
     sweep.add_argument("--workers", type=workers_count, default=default_workers(), metavar="N",
@@ -116,7 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar (it is shown only when stderr is a terminal)")
 
     report = commands.add_parser("report", help="write a sweep's report (report.md, report.html, figures) from its runs.csv")
-    report.add_argument("directory", metavar="DIR", help="the --out directory of femgrid-mpm sweep")
+    report.add_argument("directory", type=given_path, metavar="DIR", help="the --out directory of femgrid-mpm sweep")
     return parser
 
 
@@ -132,6 +132,14 @@ def output_directory(text: str, option: str = "--out") -> Path:
     except OSError as error:  # e.g. a name longer than the file system allows
         raise BadInput(f"{option} {out}: cannot be used: {error.strerror or error}") from None
     return out
+
+
+def given_path(text: str) -> str:
+    """A file or directory named on the command line: an empty one (an unset ``$DIR``) is refused,
+    not taken as the working directory."""
+    if not text:
+        raise argparse.ArgumentTypeError("is empty (give a path)")
+    return text
 
 
 def positive_steps(text: str) -> int:

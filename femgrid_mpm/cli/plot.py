@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .parser import EXIT_DONE, EXIT_WRITE_FAILED, BadInput, emit, say
+from .parser import EXIT_DONE, EXIT_WRITE_FAILED, BadInput, emit, given_path, say
 
 #: the default names of the pictures in the output directory
 POINTS_PICTURE, ENERGY_PICTURE, ANIMATION = "points.png", "energy.png", "points"
@@ -47,7 +47,7 @@ def add_arguments(command) -> None:
     """The arguments of ``femgrid-mpm plot``."""
     from ..plotting.run_directory import FIELDS
 
-    command.add_argument("directory", metavar="DIR", help="the --out directory of femgrid-mpm run (finished, stopped or interrupted)")
+    command.add_argument("directory", type=given_path, metavar="DIR", help="the --out directory of femgrid-mpm run (finished, stopped or interrupted)")
     command.add_argument("--field", choices=list(FIELDS), default="velocity", metavar="NAME",
                          help=f"colour the points by this field (default: velocity, its magnitude): {', '.join(FIELDS)}")
     command.add_argument("--record", type=record_number, default="last", metavar="N|last",

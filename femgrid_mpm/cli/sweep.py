@@ -25,7 +25,7 @@ def sweep(args) -> int:
     from ..output import atomic_write
     from ..reading import read_regular_file
     from ..sweep import SweepError, plan, read_sweep, run_sweep
-    from ..sweep.runner import SweepBusy
+    from ..sweep.directories import SweepBusy
     from ..sweep.spec import scene_file, sweep_path
 
     path = sweep_path(args.sweep)

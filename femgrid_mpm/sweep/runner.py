@@ -24,50 +24,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
+from .directories import TEMPORARY_SUFFIX, SweepLock, remove_stale, replace_directory
 from .table import RUNS_FILE, row, write_runs
 
 RUNS_DIRECTORY = "runs"
 MARKER_FILE = "sweep_run.json"
-#: a run's directory while it runs: ``.KEY.PID.tmp``, beside its final place
-TEMPORARY_SUFFIX = ".tmp"
 #: the most processes of a local cluster (each a Python with numba, ~200 MB): more is a typo
 MAX_WORKERS = 256
-
-
-class SweepBusy(OSError):
-    """Another sweep is running into the same directory; the message is one line."""
-
-
-class SweepLock:
-    """An exclusive lock on a sweep's directory (``flock`` on the directory itself, so that
-    no file is left behind), held from the first write to the end of the sweep: two sweeps
-    into one directory would replace each other's runs and ``runs.csv``."""
-
-    def __init__(self, directory: Path):
-        self.directory = Path(directory)
-        self.descriptor: int | None = None
-
-    def acquire(self) -> None:
-        """Lock the directory (it must exist); raises :class:`SweepBusy` if another process holds it."""
-        import fcntl
-
-        if self.descriptor is not None:
-            return
-        descriptor = os.open(self.directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | os.O_CLOEXEC)
-        try:
-            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(descriptor)
-            raise SweepBusy(f"another sweep is running in {self.directory} (wait for it, or give another --out)") from None
-        except OSError:  # a file system without locks: nothing to hold
-            os.close(descriptor)
-            return
-        self.descriptor = descriptor
-
-    def release(self) -> None:
-        if self.descriptor is not None:
-            os.close(self.descriptor)  # closing the descriptor releases the lock
-            self.descriptor = None
 
 
 class SweepProgress(Protocol):
@@ -169,7 +132,7 @@ def compute_run(scene_file: str, overrides: dict, directory: str, digest: str, w
                 summary = outputs.finish(stop.result, stop)
         atomic_write(temporary / MARKER_FILE, json.dumps(
             {"key": final.name, "digest": digest, "overrides": overrides, "workers": workers}, indent=2) + "\n")
-        _replace_directory(temporary, final)
+        replace_directory(temporary, final)
     except BaseException:
         shutil.rmtree(temporary, ignore_errors=True)
         raise
@@ -208,41 +171,6 @@ def _estimate_critical_dt(simulation) -> None:
     if critical is not None and 0 < critical < simulation.dt:
         warnings.warn(f"dt = {simulation.dt:.6g} s exceeds the estimated critical time step {critical:.6g} s",
                       RuntimeWarning)
-
-
-def _replace_directory(source: Path, target: Path) -> None:
-    """``source`` renamed to ``target``; an earlier ``target`` (a run of another digest) is removed."""
-    if target.exists():
-        old = target.with_name(f".{target.name}.{os.getpid()}.old")
-        shutil.rmtree(old, ignore_errors=True)
-        os.replace(target, old)
-        os.replace(source, target)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        os.replace(source, target)
-
-
-def remove_stale(runs_directory: Path) -> None:
-    """Remove the temporary directories of runs a killed sweep left (``.KEY.PID.tmp``,
-    ``.KEY.PID.old``); one whose process is alive on this machine is left alone."""
-    if runs_directory.is_dir():
-        for entry in runs_directory.iterdir():
-            if entry.name.startswith(".") and entry.name.endswith((TEMPORARY_SUFFIX, ".old")) and entry.is_dir():
-                if not process_alive(entry.name.rsplit(".", 2)[-2]):
-                    shutil.rmtree(entry, ignore_errors=True)
-
-
-def process_alive(pid_text: str) -> bool:
-    """Whether the process of this id (the text of a temporary's name) runs on this machine."""
-    if not pid_text.isdigit() or not 0 < int(pid_text) < 2**31:
-        return False
-    try:
-        os.kill(int(pid_text), 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # it exists, owned by another user
-        return True
-    return True
 
 
 def run_sweep(planned_runs: list, out: Path, *, workers: int | None = None, scheduler: str | None = None,

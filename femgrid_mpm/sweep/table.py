@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 from pathlib import Path
 
@@ -30,7 +31,7 @@ NUMBER_COLUMNS = ("steps", "points", "nodes", "dt", "wall_time", "error_end", "e
 def row(planned, summary: dict | None, workers: int | None, failure: str | None = None) -> dict:
     """The row of ``planned`` (a :class:`~femgrid_mpm.sweep.spec.PlannedRun`) from its
     ``summary``; ``failure`` for a run that could not be built or run (status ``failed``)."""
-    values = {key: text(value) for key, value in planned.varied.items()}
+    values = {key: value_text(value) for key, value in planned.varied.items()}
     summary = summary or {}
     reference = summary.get("reference") or {}
     steps = summary.get("steps")
@@ -71,6 +72,15 @@ def text(value) -> str:
     if isinstance(value, float):
         return shortest_text(value) if math.isfinite(value) else str(value)
     return " ".join(str(value).split())
+
+
+def value_text(value) -> str:
+    """A varied key's cell: :func:`text`, but distinct for distinct values (the report groups by
+    it): a string that is not one line of single spaces, or that starts with a double quote, is
+    written as its JSON (``"a  b"`` with its two spaces, ``"a\\nb"``)."""
+    if isinstance(value, str) and (value.startswith('"') or value != " ".join(value.split())):
+        return json.dumps(value)
+    return text(value)
 
 
 def write_runs(path: Path, varied: list[str], rows: list[dict]) -> None:
@@ -119,7 +129,8 @@ def read_runs(path: Path) -> tuple[list[str], list[dict]]:
     except UnicodeDecodeError as error:
         line = data[: error.start].count(b"\n") + 1
         raise ValueError(f"{path}: line {line}: not UTF-8 text (byte {data[error.start]:#04x})") from None
-    reader = csv.reader(io.StringIO(content, newline=""))
+    # a byte-order mark (a spreadsheet's "UTF-8 with BOM") is not part of the first column's name
+    reader = csv.reader(io.StringIO(content.removeprefix("\ufeff"), newline=""))
     try:
         header = next(reader, [])
         if "status" not in header or any(column not in header for column in RESULT_COLUMNS + DESCRIPTION_COLUMNS):
