@@ -490,5 +490,5 @@ def test_varied_text_values_keep_their_difference_in_runs_csv():
     cells = [value_text(value) for value in values]
     assert len(set(cells)) == len(values)
     assert all("\n" not in cell for cell in cells)
-    assert cells[0] == "a b" and cells[6:] == ["0.5", "1", "true", ""]
-    assert [json.loads(cell) for cell in cells[1:6]] == values[1:6]
+    assert cells[0] == "a b" and cells[5] == "a\\nb" and cells[6:] == ["0.5", "1", "true", ""]
+    assert [json.loads(cell) for cell in cells[1:5]] == values[1:5]
