@@ -179,6 +179,17 @@ class NegativeMassMonitor:
         return {name: getattr(self, name) for name in _MONITOR_COUNTERS}
 
     def restore(self, state: dict) -> None:
+        """Take back :meth:`state`; ValueError naming a counter that is not a count (or a step
+        where one may be None, or a ratio where the smallest one goes)."""
+        for name in _MONITOR_COUNTERS:
+            value = state[name]
+            if name == "min_ratio":
+                ok = isinstance(value, (int, float)) and not isinstance(value, bool) and not np.isnan(value)
+            else:
+                ok = (value is None and name.startswith("first_")) or (
+                    isinstance(value, int) and not isinstance(value, bool) and value >= 0)
+            if not ok:
+                raise ValueError(f"negative_mass.{name}: {value!r} is not a {'ratio' if name == 'min_ratio' else 'count'}")
         for name in _MONITOR_COUNTERS:
             setattr(self, name, state[name])
 

@@ -87,6 +87,9 @@ class Grid:
         if not (isinstance(spacing, (int, float, np.floating, np.integer)) and not isinstance(spacing, bool)
                 and math.isfinite(spacing) and spacing > 0):
             raise ValueError(f"spacing must be a positive finite number, got {spacing!r}")
+        if not (isinstance(points_per_cell, (int, np.integer)) and not isinstance(points_per_cell, bool)
+                and points_per_cell >= 1):  # gimp's particle size is the spacing over it
+            raise ValueError(f"points_per_cell must be a whole number, at least 1, got {points_per_cell!r}")
         problem = length_problem(lower, upper, spacing)
         if problem is not None:
             raise ValueError(f"{problem[0]} {problem[1]}")

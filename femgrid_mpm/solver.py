@@ -28,7 +28,7 @@ from .diagnostics import (EnergyGuard, NegativeMassMonitor, SimulationStopped, f
                           runaway_causes,
                           points_kinetic_energy, warn_of_a_long_step, warn_of_energy_drift)
 from .observers import EnergyBookkeeping, kinetic_energy
-from .effects.base import ForceNotFinite, Recorder
+from .effects.base import ForceNotFinite, Recorder, bound, checked_observers
 from .engines import engine_for
 from .grid import Grid
 from .mass import CellMasses, MassModel, NodeConstraint, SingularMassError, build_mass_model
@@ -50,8 +50,8 @@ class Simulation:
     ----------
     scene : Scene
     observers : list, optional
-        Extra observing effects (objects with ``name``, ``stage`` and
-        ``bind``), e.g. writers of particle output.
+        Extra observing effects (:class:`~femgrid_mpm.effects.Effect` s: ``name``,
+        ``stage`` and ``bind``), e.g. writers of particle output; TypeError otherwise.
     """
 
     def __init__(self, scene: Scene, observers: list | None = None):
@@ -83,10 +83,10 @@ class Simulation:
         self.n_steps = max(1, run_steps(scene, self.dt))
         warn_of_thin_bodies(scene.bodies, spec.spacing, self.grid.definition.support_width, spec.basis)
         warn_of_a_long_step(self.dt, scene.time, self.end_time)
-        watching = [*([self.energy] if self.energy else []), *(observers or [])]
+        watching = [*([self.energy] if self.energy else []), *checked_observers(observers)]
         self.effects: dict[Stage, list[tuple[str, Callable]]] = {stage: [] for stage in Stage}
         for effect in [*acting, *watching]:  # observers last: they may read dt and n_steps
-            self.effects[effect.stage].append((effect.name, effect.bind(self)))
+            self.effects[effect.stage].append((effect.name, bound(effect, self)))
         # the observers that keep a record of their own (the exact reference): in the summary,
         # in a checkpoint, and their columns in the energy record (they run before it)
         self.recorders = [action for stage in Stage for _, action in self.effects[stage] if isinstance(action, Recorder)]
@@ -190,6 +190,9 @@ class Simulation:
     def advance(self, record: bool = False) -> None:
         """One time step: the scheme's sub-steps (:mod:`femgrid_mpm.schemes`), each the paper's
         section 3.2 steps 1-11; the paper's scheme is one, the central difference started from v(0)."""
+        if self.outcome in ("completed", "stopped"):  # its result holds these arrays: they stay its end
+            raise ValueError(f"this simulation's run has {self.outcome} (step {self.step_index}, t = {self.time:.6g} s): "
+                             "it takes no more steps; run a new Simulation of the scene with a later end")
         ctx, dt, scheme = self.project(), self.dt, self.scheme
         if record:
             self._run(Stage.OBSERVE)
@@ -327,14 +330,15 @@ class Simulation:
             When a guard stops the run; its ``result`` holds the records and
             the state up to that step.
         ValueError
-            If this simulation has run already (completed or stopped): it runs
-            once, to ``time.end``.
+            If this simulation has run already (completed or stopped), or runs
+            (a call from another thread): it runs once, to ``time.end``.
         """
         if self.outcome is not None:
             raise ValueError(
                 f"this simulation's run has {self.outcome} (step {self.step_index}, t = {self.time:.6g} s): a second "
                 "run() would record its final state twice; to go further, run a new Simulation of the scene with a "
                 "later end (scene.with_overrides(**{'time.end': ...}))")
+        self.outcome = "begun"  # a second run() meanwhile (another thread, a callback) is refused
         start = clock.perf_counter()
         self._run_started = start  # for the wall time in a checkpoint
         ending = "reached t = {time:.6g} s"
@@ -361,6 +365,8 @@ class Simulation:
             raise
         finally:
             self._run_started = None
+            if self.outcome == "begun":  # interrupted (Ctrl-C, an error of a callback): run() may go on
+                self.outcome = None
         self.wall_time += clock.perf_counter() - start
         self.outcome = "completed"
         result = self.result("completed", ending.format(time=self.time))
@@ -386,14 +392,8 @@ class Simulation:
         return simulation_state(self, clock.perf_counter())
 
     def restore(self, arrays: dict, values: dict) -> None:
-        """Take back :meth:`state` into a simulation built from the same scene
-        (see :func:`femgrid_mpm.state.restore_state`).
-
-        Raises
-        ------
-        ValueError
-            If the state does not fit this simulation (another scene).
-        """
+        """Take back :meth:`state` into a simulation built from the same scene; ValueError, this one
+        unchanged, for a state that does not fit (:func:`femgrid_mpm.state.restore_state`)."""
         restore_state(self, arrays, values)
 
     def result(self, status: str, message: str) -> RunResult:

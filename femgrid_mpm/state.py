@@ -6,6 +6,8 @@ step; a run continued from a restored state repeats the original bit for bit.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 
@@ -47,18 +49,40 @@ def simulation_state(simulation, now: float) -> tuple[dict, dict]:
 def restore_state(simulation, arrays: dict, values: dict) -> None:
     """Take back :func:`simulation_state` into a simulation built from the same scene.
 
+    Everything is checked before anything is taken back, and a state that fails part way (a
+    value of the wrong type where the checks do not look) is undone: a refused state leaves
+    this simulation as it was.
+
     Raises
     ------
     ValueError
-        If the state does not fit this simulation (another scene).
+        If the state does not fit this simulation (another scene), or a value is missing or
+        of the wrong type; the message names it.
     """
+    _check(simulation, arrays, values)
+    before = simulation_state(simulation, simulation._run_started or 0.0)  # its own wall time, no more
+    before = ({name: np.array(array, copy=True) for name, array in before[0].items()}, copy.deepcopy(before[1]))
+    try:
+        _take_back(simulation, arrays, values)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, ArithmeticError) as error:
+        _take_back(simulation, *before)
+        what = f"no {error.args[0]!r}" if isinstance(error, KeyError) and error.args else str(error)
+        raise ValueError(f"the state does not fit this scene: {' '.join(what.split())[:200]}") from None
+
+
+def _check(simulation, arrays: dict, values: dict) -> None:
+    """Raise ValueError naming what of ``(arrays, values)`` does not fit ``simulation``."""
     p = simulation.particles
-    # everything is checked before anything is taken back: a refused state leaves this one as it was
-    saved = {name: np.asarray(arrays[f"particles.{name}"]) for name in p.__dataclass_fields__}
-    for name, array in saved.items():
-        current = getattr(p, name)
+    for name in p.__dataclass_fields__:
+        if f"particles.{name}" not in arrays:
+            raise ValueError(f"particles.{name}: missing")
+        array, current = np.asarray(arrays[f"particles.{name}"]), getattr(p, name)
         if array.shape != current.shape or array.dtype != current.dtype:
             raise ValueError(f"particles.{name}: shape {array.shape} {array.dtype}, this scene has {current.shape} {current.dtype}")
+    missing = [key for key in ("step", "time", "dt", "wall_time", "work", "energy_guard", "negative_mass")
+               + (("energy_initial",) if simulation.energy is not None else ()) if key not in values]
+    if missing:
+        raise ValueError(f"{missing[0]}: missing")
     # dt = "auto": another version's estimate of the same step may differ in its last bits; the
     # run goes on with this version's step
     dt = values["dt"]
@@ -70,26 +94,35 @@ def restore_state(simulation, arrays: dict, values: dict) -> None:
         raise ValueError(f"step {step!r}, this scene runs steps 0 to {simulation.n_steps}")
     if isinstance(time, bool) or not isinstance(time, (int, float)) or not np.isfinite(time):
         raise ValueError(f"time {time!r}: not a finite number of seconds")
-    body = saved["body"]
+    if abs(time - step * dt) > 1e-9 * max(abs(step * dt), dt):  # the clock is step * dt after every step
+        raise ValueError(f"time {time!r} s: step {step} of {dt!r} s ends at {step * dt!r} s")
+    wall = values["wall_time"]
+    if isinstance(wall, bool) or not isinstance(wall, (int, float)) or not 0 <= wall < np.inf:
+        raise ValueError(f"wall_time {wall!r}: not a number of seconds, at least 0")
+    body = np.asarray(arrays["particles.body"])
     if body.size and not 0 <= int(body.min()) <= int(body.max()) < len(simulation.scene.bodies):
         raise ValueError(f"particles.body: indices {int(body.min())} to {int(body.max())}, "
                          f"this scene has {len(simulation.scene.bodies)} bodies")
     if simulation.energy is not None:
-        rows = np.asarray(arrays["energy.rows"])
+        rows = np.asarray(arrays.get("energy.rows", np.zeros((0, 0))))
         width = len(simulation.energy.columns)
         if rows.size and (rows.ndim != 2 or rows.shape[1] != width):
             raise ValueError(f"energy.rows: shape {rows.shape}, the energy record has {width} columns")
-    records = [np.asarray(arrays[f"records.{index}"]) for index in range(len(simulation.recorders))]
-    for recorder, rows in zip(simulation.recorders, records):
-        recorder.restore(rows)  # checks the shape first; these go back whole or not at all
-    for name, array in saved.items():
-        np.copyto(getattr(p, name), array)  # in place: effects and engines may hold the arrays
+
+
+def _take_back(simulation, arrays: dict, values: dict) -> None:
+    p = simulation.particles
+    for index, recorder in enumerate(simulation.recorders):
+        recorder.restore(np.asarray(arrays[f"records.{index}"]))  # checks the shape first
+    for name in p.__dataclass_fields__:
+        np.copyto(getattr(p, name), np.asarray(arrays[f"particles.{name}"]))  # in place: effects and engines hold them
     simulation.step_index, simulation.time = int(values["step"]), float(values["time"])
     simulation.wall_time = float(values["wall_time"])
+    work = [(str(name), float(value)) for name, value in values["work"]]
     simulation.context.work.clear()
-    simulation.context.work.update((str(name), float(value)) for name, value in values["work"])
-    simulation.energy_guard.initial = float(values["energy_guard"]["initial"])
-    simulation.energy_guard.floor = float(values["energy_guard"]["floor"])
+    simulation.context.work.update(work)
+    guard = values["energy_guard"]
+    simulation.energy_guard.initial, simulation.energy_guard.floor = float(guard["initial"]), float(guard["floor"])
     simulation.negative_mass.restore(values["negative_mass"])
     if simulation.energy is not None:
         simulation.energy.restore(values["energy_initial"], arrays["energy.rows"])

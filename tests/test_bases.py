@@ -249,6 +249,12 @@ def test_nodes_where():
     (dict(spacing=1e-300), "outside the supported range"),
     (dict(spacing=1e300), "outside the supported range"),
     (dict(lower=(-1e308, 0.0)), "lower .* outside the supported range"),
+    # gimp divided by it: ZeroDivisionError, an IndexError later, or functions that did not sum to 1
+    (dict(basis="gimp", points_per_cell=0), "points_per_cell must be a whole number, at least 1, got 0"),
+    (dict(basis="gimp", points_per_cell=-1), "points_per_cell must be a whole number"),
+    (dict(basis="gimp", points_per_cell=0.5), "points_per_cell must be a whole number"),
+    (dict(basis="gimp", points_per_cell="2"), "points_per_cell must be a whole number"),
+    (dict(basis="q1", points_per_cell=True), "points_per_cell must be a whole number"),
 ])
 def test_bad_grid_arguments(kwargs, message):
     arguments = dict(basis="q1", lower=(0.0, 0.0), upper=(1.0, 1.0), spacing=0.5) | kwargs

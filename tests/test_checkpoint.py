@@ -162,6 +162,44 @@ def test_restore_refuses_another_scene(tmp_path):
         other.restore(arrays, values)
 
 
+@pytest.mark.parametrize("mass", ["lumped", "consistent"])
+@pytest.mark.parametrize("change, problem", [
+    ({"wall_time": "x"}, "wall_time 'x'"), ({"work": [["a", "b"]]}, "could not convert"),
+    ({"energy_guard": None}, "not subscriptable"), ({"energy_initial": None}, "'NoneType'"),
+    ({"negative_mass": {"first_step": "x"}}, "negative_mass.first_step: 'x' is not a count"),
+    ({"time": -1.0}, "time -1.0 s: step 4 of"), ({"mass": {"iterations": "x"}}, "invalid literal"),
+    ({"dt": None}, "dt None"),
+])
+def test_a_state_that_fails_part_way_is_undone(mass, change, problem):
+    """restore() checked a few values and took the rest back as it went: a bad one further on
+    raised KeyError, TypeError or AttributeError (a traceback of `resume`, exit 1) with the
+    points and step already replaced; a negative time was taken."""
+    scene = bundled_scene("vibrating_bar").with_overrides(**{"solver.mass": mass, "output.every": 1,
+                                                             "output.energy": True})
+    source = Simulation(scene)
+    for _ in range(4):
+        source.advance(record=True)
+    arrays, values = source.state()
+    if "negative_mass" in change:
+        change = {"negative_mass": {**values["negative_mass"], **change["negative_mass"]}}
+    if "mass" in change:
+        if mass == "lumped":
+            change = {"step": 4.5}
+            problem = "step 4.5"
+        else:
+            change = {"mass": {**values["mass"], **change["mass"]}}
+    target = Simulation(scene)
+    target.advance(record=True)
+    before = target.state()
+    with pytest.raises(ValueError, match=problem.replace("(", r"\(").replace(".", r"\.")):
+        target.restore(arrays, {**values, **change})
+    after = target.state()
+    assert after[1] == before[1] and after[0].keys() == before[0].keys()
+    assert all(np.array_equal(after[0][name], before[0][name]) for name in before[0])
+    target.restore(arrays, values)  # and the good state is taken
+    assert np.array_equal(target.run().particles.x, source.run().particles.x)
+
+
 # -- the command line ----------------------------------------------------------------------------
 
 

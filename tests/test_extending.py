@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import femgrid_mpm
 from femgrid_mpm.scene import Scene
@@ -39,6 +40,7 @@ def block_containing(text: str) -> str:
 BAR = """
 import json, sys
 import numpy as np
+import pytest
 from femgrid_mpm.scene import bundled_scene
 from femgrid_mpm.solver import Simulation
 from femgrid_mpm.bases import BASES
@@ -145,3 +147,85 @@ def test_a_body_force_with_an_unknown_variable_is_refused():
 
     with pytest.raises(SceneError, match="name 'z' is not allowed"):
         block_with_loads().with_overrides(**{"loads": [{"kind": "body_force", "acceleration": ["z", "0"]}]})
+
+
+def test_a_new_engine_is_one_file_and_its_registry_line():
+    """docs/architecture.md: an engine is one file and its line in ``ENGINES``; the scene's
+    ``solver.engine`` was a fixed list and refused the new name.  An engine registered before
+    the scene is loaded, as the registry line is (a subclass of the scipy engine), runs the
+    bar, bit for bit the scipy engine's run."""
+    code = """
+import json, sys, numpy as np
+from femgrid_mpm.engines import ENGINES, ScipyTransfer
+class Mine(ScipyTransfer):
+    pass
+ENGINES["mine"] = Mine
+from femgrid_mpm.scene import bundled_scene
+from femgrid_mpm.solver import Simulation
+runs = {e: Simulation(bundled_scene("vibrating_bar").with_overrides(**{"time.end": 0.3, "solver.engine": e})).run()
+        for e in ("scipy", "mine")}
+print(json.dumps({"same": bool(np.array_equal(runs["scipy"].particles.x, runs["mine"].particles.x))}))
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600,
+                          env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout.splitlines()[-1]) == {"same": True}
+
+
+REGISTRY_SLIPS = {
+    "a basis without sized": (
+        "from femgrid_mpm.bases import BASES, Q1\n"
+        "class Old:\n"
+        "    name = 'old'; degree = 1; cells_per_element = 1; support_width = 2; nonnegative = True\n"
+        "    critical_step_factors = {'lumped': 1.0}; tensor_gram = False; mass_threshold = True\n"
+        "    def build(self, *args): return Q1.build(*args)\n"
+        "BASES['old'] = Old()\n",
+        "TypeError: bases.BASES['old']: a Old without sized (femgrid_mpm.bases.BasisDefinition)"),
+    "an effect listed twice": (
+        "from femgrid_mpm import effects\n"
+        "effects.REGISTRY = effects.REGISTRY + (effects.REGISTRY[0],)\n",
+        "ValueError: effects.REGISTRY: PointLoad is listed twice"),
+    "an effect in a table the scene lacks": (
+        "from femgrid_mpm import effects\n"
+        "from femgrid_mpm.effects.gravity import Gravity\n"
+        "class Lift(Gravity):\n"
+        "    pass\n"
+        "effects.REGISTRY = effects.REGISTRY + (effects.Entry(Lift, 'lods', kind='lift'),)\n",
+        "ValueError: effects.REGISTRY: Lift: the scene has no table 'lods' (its tables: loads, damping, contact, "
+        "supports, reference)"),
+}
+
+
+@pytest.mark.parametrize("slip", sorted(REGISTRY_SLIPS))
+def test_a_registry_entry_the_scene_cannot_use_is_named_when_the_scene_loads(slip):
+    """A registry line of a basis or effect that lacks part of its interface failed later,
+    inside the package (AttributeError from the scene's checks, 'too many values to unpack'),
+    or was ignored (an effect's unknown table)."""
+    setup, message = REGISTRY_SLIPS[slip]
+    done = subprocess.run([sys.executable, "-c", setup + "import femgrid_mpm.scene\n"], capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 1
+    assert done.stderr.strip().splitlines()[-1] == message
+
+
+def test_observers_that_are_not_effects_are_refused_before_the_run():
+    """observers=[object()] or a string: AttributeError 'stage' from inside the simulation; an
+    observer whose bind returned None: TypeError at the first record."""
+    from femgrid_mpm.effects import Stage
+    from femgrid_mpm.effects.base import Effect
+    from femgrid_mpm.scene import bundled_scene
+
+    class Silent(Effect):
+        name = "silent"
+        stage = Stage.OBSERVE
+
+        def bind(self, simulation):
+            return None
+
+    scene = bundled_scene("vibrating_bar").with_overrides(**{"time.end": 0.3})
+    for observers, message in ((object(), "observers: a list of Effect objects, got object"),
+                               ("ab", "observers: a list of Effect objects, got str"),
+                               ([object()], r"observers\[0\]: a object, not an Effect"),
+                               ([Silent()], "effect 'silent': bind\\(\\) returned a NoneType, not an action")):
+        with pytest.raises(TypeError, match=message):
+            Simulation(scene, observers=observers)

@@ -140,6 +140,43 @@ def test_a_stopped_run_is_not_run_again():
         simulation.run()
     with pytest.raises(ValueError, match="has stopped"):
         simulation.run()
+    with pytest.raises(ValueError, match="has stopped"):
+        simulation.advance()
+
+
+def test_a_finished_run_takes_no_more_steps_and_its_result_stays(block_scene):
+    """advance() after run(): it stepped on past time.end and moved the returned result's
+    points (the result holds the simulation's arrays)."""
+    simulation = Simulation(block_scene(end=0.05, every=1))
+    result = simulation.run()
+    x = result.particles.x.copy()
+    with pytest.raises(ValueError, match=r"has completed \(step 5, t = 0.05 s\): it takes no more steps"):
+        simulation.advance()
+    assert simulation.step_index == 5 and np.array_equal(result.particles.x, x)
+
+
+def test_run_called_again_while_it_runs_is_refused_and_an_interrupted_run_goes_on(block_scene):
+    """A second run() while the first runs (from another thread, or its progress callback) was
+    let through: both stepped the one state and both wrote the final record."""
+    simulation = Simulation(block_scene(end=0.1, every=1).with_overrides(**{"output.energy": True}))
+    refused = []
+
+    def progress(step, time):
+        if step == 3:
+            with pytest.raises(ValueError, match=r"has begun \(step 3"):
+                simulation.run()
+            refused.append(step)
+        if step == 6 and len(refused) == 1:
+            refused.append(step)
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        simulation.run(progress=progress)
+    assert refused == [3, 6] and simulation.step_index == 6 and simulation.outcome is None
+    result = simulation.run(progress=progress)  # an interrupted run goes on to its end, once
+    reference = Simulation(block_scene(end=0.1, every=1).with_overrides(**{"output.energy": True})).run()
+    assert result.status == "completed" and len(simulation.energy.rows) == simulation.n_steps + 1
+    assert np.array_equal(result.particles.x, reference.particles.x)
 
 
 # -- units slips -----------------------------------------------------------------------------------

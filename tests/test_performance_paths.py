@@ -341,6 +341,34 @@ def test_threaded_kernels_agree_with_serial_ones(basis, mass):
             getattr(threaded.particles, name)[:] = expected
 
 
+def test_threaded_runs_depend_on_the_count_asked_for_not_the_machines():
+    """solver.threads = 3 cuts the points into 3 chunks whatever numba has: the same bits with
+    1 and 2 threads available (the count was capped at the machine's, which changed the sums'
+    grouping: a scene's result depended on NUMBA_NUM_THREADS)."""
+    import hashlib
+    import os
+    import subprocess
+
+    script = ("import sys, hashlib; sys.path.insert(0, 'benchmarks'); from step import block_scene; "
+              "from femgrid_mpm.solver import Simulation; "
+              "s = Simulation(block_scene('q2', 'hrz', 1000).with_overrides(**{'solver.threads': 3})); "
+              "[s.advance() for _ in range(5)]; "
+              "print(s.transfer.threads, hashlib.sha256(s.particles.x.tobytes() + s.particles.v.tobytes()).hexdigest())")
+    root = Path(__file__).parents[1]
+    outputs = []
+    for available in ("1", "2"):
+        env = {**os.environ, "NUMBA_NUM_THREADS": available}
+        done = subprocess.run([sys.executable, "-c", script], cwd=root, env=env, capture_output=True, text=True,
+                              timeout=600)
+        assert done.returncode == 0, done.stderr
+        outputs.append(done.stdout.split())
+    assert outputs[0] == outputs[1] and outputs[0][0] == "3"
+    serial = Simulation(block_scene("q2", "hrz", 1000))
+    for _ in range(5):
+        serial.advance()
+    assert hashlib.sha256(serial.particles.x.tobytes() + serial.particles.v.tobytes()).hexdigest() != outputs[0][1]
+
+
 def test_minimal_q1_step_is_the_library_step():
     """`benchmarks/minimal_q1.py`, the yardstick `benchmarks/step.py` times beside the
     library, computes the library's q1 lumped step: from the same state, five steps agree

@@ -20,6 +20,21 @@ from .polynomial import LocalPolynomials
 
 BASES = {builder.name: builder for builder in (Q1, Q2, SERENDIPITY, BSPLINE3, BSPLINE3_OPEN, GIMP, BSPLINE2, BSPLINE2_OPEN)}
 
+
+
+def check_registry() -> None:
+    """Raise TypeError naming the first entry of :data:`BASES` that lacks part of
+    :class:`BasisDefinition` (the scene reads every attribute), or whose ``name`` is not its key."""
+    members = [name for name in BasisDefinition.__annotations__] + ["build"]
+    for key, basis in BASES.items():
+        missing = [name for name in members if not hasattr(basis, name)]
+        if missing:
+            raise TypeError(f"bases.BASES[{key!r}]: a {type(basis).__name__} without {', '.join(missing)} "
+                            "(femgrid_mpm.bases.BasisDefinition)")
+        if basis.name != key:
+            raise TypeError(f"bases.BASES[{key!r}]: its name is {basis.name!r}")
+
+
 __all__ = [
     "BASES",
     "BasisDefinition",
@@ -36,5 +51,6 @@ __all__ = [
     "Q1",
     "Q2",
     "SERENDIPITY",
+    "check_registry",
     "cubic_spline",
 ]

@@ -68,6 +68,32 @@ REGISTRY = (
 )
 
 
+def check_registry(scene_tables: tuple[str, ...]) -> None:
+    """Raise TypeError or ValueError naming the first entry of :data:`REGISTRY` that the scene
+    could not declare: not an :class:`~femgrid_mpm.effects.base.Effect` with a
+    :class:`Stage`, listed twice, in a table the scene does not have (``scene_tables``), or
+    without a ``kind`` of its own in a table of several."""
+    from .base import Effect
+
+    seen: set = set()
+    for entry in REGISTRY:
+        effect = entry.effect
+        if not (isinstance(effect, type) and issubclass(effect, Effect)):
+            raise TypeError(f"effects.REGISTRY: {effect!r} is not an Effect class (femgrid_mpm.effects.base.Effect)")
+        if not isinstance(getattr(effect, "stage", None), Stage):
+            raise TypeError(f"effects.REGISTRY: {effect.__name__}.stage is not a Stage")
+        if effect in seen:
+            raise ValueError(f"effects.REGISTRY: {effect.__name__} is listed twice")
+        seen.add(effect)
+        if entry.table not in scene_tables:
+            raise ValueError(f"effects.REGISTRY: {effect.__name__}: the scene has no table {entry.table!r} "
+                             f"(its tables: {', '.join(scene_tables)})")
+    for table in tables():
+        several = kinds(table)
+        if len(entries(table)) > 1 and (len(several) != len(entries(table)) or len(set(several)) != len(several)):
+            raise ValueError(f"effects.REGISTRY: the effects of {table!r} need a kind each, none twice (got {several})")
+
+
 def tables() -> tuple[str, ...]:
     """The scene tables that declare effects, in step order."""
     return tuple(dict.fromkeys(entry.table for entry in REGISTRY))
@@ -123,6 +149,7 @@ __all__ = [
     "StepContext",
     "Support",
     "acts",
+    "check_registry",
     "entries",
     "kinds",
     "scene_key",

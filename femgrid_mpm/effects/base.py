@@ -18,6 +18,7 @@ Adding an effect: one class here in ``effects/``, one line in
 from __future__ import annotations
 
 import abc
+from collections.abc import Iterable
 from typing import ClassVar
 
 import numpy as np
@@ -104,3 +105,29 @@ class ForceNotFinite(ArithmeticError):
         return (f"{scene_key(scene, self.effect)}.{self.key}: gives NaN or infinity (or a force beyond 1e308 N) at "
                 f"{len(self.points)} point(s) at t = {self.time:.6g} s; first at "
                 f"{describe_point(particles, scene.bodies, int(self.points[0]))}")
+
+
+def checked_observers(observers) -> list:
+    """``Simulation(observers=...)`` as a list of :class:`Effect` s; TypeError naming the first
+    entry that is not one (or a stage that is not a :class:`Stage`), before anything is bound."""
+    if observers is None:
+        return []
+    if isinstance(observers, (str, bytes, Effect)) or not isinstance(observers, Iterable):
+        raise TypeError(f"observers: a list of Effect objects, got {type(observers).__name__}")
+    listed = list(observers)
+    for index, observer in enumerate(listed):
+        if not isinstance(observer, Effect):
+            raise TypeError(f"observers[{index}]: a {type(observer).__name__}, not an Effect "
+                            "(femgrid_mpm.effects.Effect: a name, a stage and bind)")
+        if not isinstance(observer.stage, Stage):
+            raise TypeError(f"observers[{index}] ({observer.name!r}): stage {observer.stage!r} is not a Stage")
+    return listed
+
+
+def bound(effect: Effect, simulation) -> Action:
+    """``effect.bind(simulation)``, checked to be an action the step can call."""
+    action = effect.bind(simulation)
+    if not callable(action):
+        raise TypeError(f"effect {effect.name!r}: bind() returned a {type(action).__name__}, not an action "
+                        "(a callable of the step's context)")
+    return action

@@ -93,12 +93,13 @@ class CompiledTransfer(Engine):
         self._cells = simulation.cell_masses
         # threads: chunked variants of the tensor and folded kernels (lumped P2G, linear elastic stress,
         # G2P), whose serial kernel the basis' form picks (None: tensor)
-        threads = simulation.scene.solver.threads
-        self.threads = min(threads, numba.config.NUMBA_NUM_THREADS) if family in ("tensor", "folded") else 1
+        # the points are cut into `threads` chunks whatever the machine has (the sums' grouping, hence the
+        # bits, depend on the count asked for only); numba runs them on as many threads as it has
+        self.threads = simulation.scene.solver.threads if family in ("tensor", "folded") else 1
         # the threaded kernels' arguments: a form before the connectivity (the fold's place), None for tensor bases
         self._chunked_arrays = (*self._arrays[:-1], None, self._arrays[-1]) if family == "tensor" else self._arrays
         if self.threads > 1:
-            numba.set_num_threads(self.threads)
+            numba.set_num_threads(min(self.threads, numba.config.NUMBA_NUM_THREADS))
             self._mass_parts = np.zeros((self.threads, n_nodes))
             self._absolute_parts = np.zeros((self.threads, n_nodes if self.signed or self.hrz else 1))
             self._momentum_parts = np.zeros((self.threads, n_nodes, 2))

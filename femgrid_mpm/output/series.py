@@ -17,6 +17,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..effects.base import Effect
 from ..step import Stage, StepContext
 from .files import Throttle, atomic_path, atomic_write, shortest_text
 
@@ -37,7 +38,7 @@ def collection_text(entries: list[tuple[float, str]]) -> str:
 
 
 @dataclass
-class MeshSeries(abc.ABC):
+class MeshSeries(Effect):
     """An observer writing one VTK unstructured grid per record (binary, zlib).
 
     Its :attr:`name` names everything it writes in the run's directory:

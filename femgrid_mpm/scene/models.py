@@ -25,8 +25,10 @@ from pydantic import BaseModel, ConfigDict, Field, NonNegativeFloat, PositiveFlo
 
 from .. import effects
 from ..bases import BASES
+from ..bases import check_registry as check_bases
 from ..schemes import SCHEMES
 from ..effects import PointLoad
+from ..engines import ENGINES
 from ..expressions import compile_expression
 from ..grid import MAX_NODES, length_problem, node_count
 from ..particles import count_rectangle
@@ -128,8 +130,8 @@ class SolverSpec(_Model):
     mix: Annotated[float, Field(ge=0, le=1)] = 0.0
     linear_solver: Literal["auto", "direct", "cg"] = "auto"
     cg_tolerance: Annotated[float, Field(gt=0, lt=1)] = 1e-6
-    #: the step's transfers: compiled kernels, or scipy.sparse (the reference)
-    engine: Literal["numba", "scipy"] = "numba"
+    #: the step's transfers (:data:`femgrid_mpm.engines.ENGINES`): compiled kernels, or scipy.sparse (the reference)
+    engine: Literal[tuple(ENGINES)] = "numba"
     #: numba engine: threads for the tensor-product and serendipity kernels (1: serial, reproducible bit for bit)
     threads: Annotated[int, Field(ge=1, le=256)] = 1
     #: the time integration (:data:`femgrid_mpm.schemes.SCHEMES`): the paper's order, the centred
@@ -192,6 +194,8 @@ class Body(_Model):
 
 # The effects' tables, from the registry (femgrid_mpm.effects.REGISTRY): a new kind of
 # load (or of damping) is its class and one registry line, no edit here.
+effects.check_registry(("loads", "damping", "contact", "supports", "reference"))
+check_bases()
 #: ``[[loads]]``: a union discriminated on ``kind``
 Load = effects.table_type("loads")
 LOAD_KINDS = effects.kinds("loads")
