@@ -427,6 +427,18 @@ def test_the_python_api_refuses_in_one_scene_error_line(value, words):
         assert str(error.value).startswith(words) and "\n" not in str(error.value)
 
 
+def test_a_scene_changed_by_model_copy_is_checked_by_the_simulation():
+    """pydantic's model_copy(update=...) checks nothing: a step of -1 s (a dict where a table's
+    model goes) ran into an AttributeError inside the simulation."""
+    scene = bundled_scene("vibrating_bar")
+    bad = scene.model_copy(update={"time": {"dt": -1, "end": 1.0}})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # and pydantic's serializer warning is not shown
+        with pytest.raises(SceneError, match=r"^scene: time.dt: must be greater than 0 or 'auto' \(got -1\)"):
+            Simulation(bad)
+    assert Scene.model_validate(scene) is scene
+
+
 # -- signals -------------------------------------------------------------------------------------
 
 

@@ -19,6 +19,7 @@ Examples
 
 from __future__ import annotations
 
+import warnings
 from typing import Annotated, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, NonNegativeFloat, PositiveFloat, PositiveInt, Strict, field_validator, model_validator
@@ -343,17 +344,16 @@ class Scene(_Model):
 
     @classmethod
     def model_validate(cls, obj, **options) -> "Scene":
-        """The scene of ``obj``, a dict of a scene file's tables, checked as a file is
-        (numpy arrays and scalars taken as lists and numbers).
-
-        Raises
-        ------
-        SceneError
-            One line naming the key (``scene: grid.spacing: must be a number``).
-        """
+        """The scene of ``obj``, a dict of a scene file's tables (or a Scene), checked as a file is
+        (numpy arrays and scalars taken as lists and numbers); :class:`SceneError`, one line
+        naming the key (``scene: grid.spacing: must be a number``), if it does not hold."""
         if options:  # pydantic's own options (strict, context, ...): pydantic's own validation
             return super().model_validate(obj, **options)
-        if isinstance(obj, cls):
+        if isinstance(obj, cls):  # checked again: model_copy(update=...) and model_construct check nothing
+            with warnings.catch_warnings():  # pydantic's warning of such a copy's unexpected types
+                warnings.simplefilter("ignore")
+                data = obj.model_dump(mode="json", exclude_none=True)
+            validated(cls, data, {}, "scene")
             return obj
         if not isinstance(obj, dict):
             raise SceneError(f"scene: must be a dict of the tables of a scene file, got {type(obj).__name__}")
