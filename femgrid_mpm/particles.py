@@ -102,9 +102,14 @@ def seed_rectangle(lower, upper, spacing: float, points_per_cell: int) -> tuple[
     return np.column_stack([gx.ravel(), gy.ravel()]), float(pitch[0] * pitch[1])
 
 
-def count_rectangle(lower, upper, spacing: float, points_per_cell: int) -> int:
-    """Number of points :func:`seed_rectangle` makes, without making them."""
-    return int(np.prod(points_across(lower, upper, spacing, points_per_cell)))
+def count_rectangle(lower, upper, spacing: float, points_per_cell: int) -> int | float:
+    """Number of points :func:`seed_rectangle` makes, without making them: in Python's numbers,
+    not int64 (which wrapped for points_per_cell near 2**63, to a count under the limits), a
+    float where it passes 2**53 (for a limit's test and message)."""
+    across = [max(1.0, float(np.rint((float(b) - float(a)) * float(points_per_cell) / spacing)))
+              for a, b in zip(lower, upper)]
+    total = across[0] * across[1]
+    return int(total) if total < 2**53 else total
 
 
 def points_across(lower, upper, spacing: float, points_per_cell: int) -> np.ndarray:

@@ -140,6 +140,13 @@ BAD_SCENES = [
     # sizes that cannot fit in memory, refused before anything is allocated
     ("too many nodes", replaced("spacing = 0.5", "spacing = 1e-5"), "grid.spacing", "more than the limit of 1e+08"),
     ("too many points", replaced("points_per_cell = 2", "points_per_cell = 20000"), "bodies[0].points_per_cell", "more than the limit of 1e+08"),
+    # counted in int64 these wrapped to counts under the limit: 0 points, a traceback, the earlier outputs gone
+    ("points near 2**63", replaced("points_per_cell = 2", "points_per_cell = 9223372036854775807"),
+     "bodies[0].points_per_cell", "would have 3.4e+38 points"),
+    ("points per cell past 64 bits", replaced("points_per_cell = 2", "points_per_cell = 99999999999999999999"),
+     "bodies[0].points_per_cell", "must be less than or equal to 9223372036854775807"),
+    ("points of 1e9 per cell", replaced("points_per_cell = 2", "points_per_cell = 3000000000"),
+     "bodies[0].points_per_cell", "more than the limit of 1e+08"),
     # unsafe or malformed expressions
     ("attribute access", replaced('"0.1*cos(pi*x/5)"', '"x.__class__"'), "bodies[0].velocity", "attribute access is not allowed"),
     ("import", replaced('"0.1*cos(pi*x/5)"', "\"__import__('os')\""), "bodies[0].velocity", "'__import__' is not allowed"),

@@ -22,7 +22,7 @@ from __future__ import annotations
 import warnings
 from typing import Annotated, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, NonNegativeFloat, PositiveFloat, PositiveInt, Strict, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, NonNegativeFloat, PositiveFloat, Strict, field_validator, model_validator
 
 from .. import effects
 from ..bases import BASES
@@ -174,7 +174,7 @@ class Body(_Model):
     name: Annotated[str, Field(min_length=1)]
     lower: Pair
     upper: Pair
-    points_per_cell: PositiveInt = 2
+    points_per_cell: Annotated[int, Field(gt=0, le=2**63 - 1)] = 2
     velocity: tuple[Union[float, str], Union[float, str]] = (0.0, 0.0)
     material: Material
 
@@ -214,12 +214,12 @@ class Output(_Model):
     """``[output]``: a record every ``every`` steps; ``energy`` bookkeeping; ``particles`` and
     ``grid`` (nodal mass, momentum, velocity, negative-mass flag) as ParaView series."""
 
-    every: PositiveInt = 1
+    every: Annotated[int, Field(gt=0, le=2**63 - 1)] = 1
     energy: bool = True
     particles: bool = False
     grid: bool = False
     #: records estimated to take more bytes than this are refused before the run starts
-    max_bytes: Annotated[int, Field(ge=1)] = MAX_RECORD_BYTES
+    max_bytes: Annotated[int, Field(ge=1, le=2**63 - 1)] = MAX_RECORD_BYTES
 
 
 class Scene(_Model):
