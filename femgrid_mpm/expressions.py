@@ -220,18 +220,27 @@ class _Compiler:
             f"name {name!r} is not allowed in expression {self.text!r} (allowed: {self.allowed})"
         )
 
+    def number(self, node: ast.AST) -> Evaluator:
+        """An operand of arithmetic: a comparison or a logical operation counts as 1.0 or 0.0
+        (numpy refuses ``-`` on booleans: ``(x < 1) - (x > 2)`` and ``-(x < 1)`` failed when
+        evaluated, after the scene had been taken)."""
+        evaluate = self.visit(node)
+        if isinstance(node, (ast.Compare, ast.BoolOp)) or (isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not)):
+            return lambda values: np.asarray(evaluate(values), dtype=float)
+        return evaluate
+
     def visit_BinOp(self, node: ast.BinOp) -> Evaluator:
         op = _BINARY.get(type(node.op))
         if op is None:
             raise self.fail(f"the operator {type(node.op).__name__}")
-        left, right = self.visit(node.left), self.visit(node.right)
+        left, right = self.number(node.left), self.number(node.right)
         return lambda values: op(left(values), right(values))
 
     def visit_UnaryOp(self, node: ast.UnaryOp) -> Evaluator:
         op = _UNARY.get(type(node.op))
         if op is None:
             raise self.fail(f"the operator {type(node.op).__name__}")
-        operand = self.visit(node.operand)
+        operand = self.visit(node.operand) if isinstance(node.op, ast.Not) else self.number(node.operand)
         return lambda values: op(operand(values))
 
     def visit_BoolOp(self, node: ast.BoolOp) -> Evaluator:

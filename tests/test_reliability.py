@@ -384,6 +384,26 @@ def test_min_max_state_their_real_argument_limits():
     assert compile_expression("max(" + ", ".join([f"x + {k}" for k in range(64)]) + ")", ("x",))(x=np.array([2.0]))[0] == 65.0
 
 
+@pytest.mark.parametrize("text, expected", [
+    ("(x < 1) - (x > 2)", [1.0, 1.0, 0.0, -1.0]), ("-(x < 1)", [-1.0, -1.0, 0.0, 0.0]),
+    ("+(x <= 0)", [1.0, 0.0, 0.0, 0.0]), ("(x < 1 and x > 0) - 1", [-1.0, 0.0, -1.0, -1.0]),
+    ("-(not (x < 1))", [0.0, 0.0, -1.0, -1.0]), ("(x < 1) * 2", [2.0, 2.0, 0.0, 0.0]),
+])
+def test_comparisons_in_arithmetic_count_as_one_and_zero(text, expected):
+    """numpy refuses ``-`` on booleans: these passed the scene's checks and stopped the run with
+    a traceback when evaluated (a body force at its first step, the earlier outputs gone)."""
+    value = compile_expression(text, ("x",))(x=np.array([0.0, 0.5, 1.5, 2.5]))
+    assert value.dtype == float and value.tolist() == expected
+
+
+def test_a_body_force_of_comparisons_runs(block_scene):
+    scene = block_scene(end=0.02).with_overrides(**{"loads": [
+        {"kind": "body_force", "acceleration": ["(t < 1) - (t > 2)", "0"]}]})
+    simulation = Simulation(scene)
+    simulation.run()
+    assert np.allclose(simulation.particles.v[:, 0] - scene.bodies[0].velocity[0], 0.02)
+
+
 @pytest.mark.parametrize("value", ["[true, false]", "[\"0\", 0]"])
 def test_grid_lower_of_booleans_or_strings_names_grid_lower(capsys, block_file, value):
     code, _, err = run_cli(["info", block_file, "--set", f"grid.lower={value}"], capsys)
