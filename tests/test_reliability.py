@@ -508,6 +508,55 @@ def test_sigterm_and_sighup_end_a_run_as_sigint_does(tmp_path, signum):
     assert_interrupted_outputs(out)
 
 
+def test_an_interrupted_run_ends_between_two_steps(tmp_path):
+    """A signal in the middle of a step raised there: final.npz held the stresses of step N + 1
+    with the positions of step N (4 of 14 SIGTERMs).  Now the step under way ends first: each
+    array of final.npz is the state after its step, run again here."""
+    from femgrid_mpm.scene import load_scene
+
+    for trial in range(3):
+        out = tmp_path / f"out{trial}"
+        process = long_bar_run(out)
+        try:
+            wait_for_records(process, out)
+            time.sleep(0.03 * trial)
+            process.send_signal(signal.SIGTERM)
+            assert process.wait(timeout=120) == 143
+        finally:
+            process.kill()
+        final = np.load(out / "final.npz")
+        simulation = Simulation(load_scene(out / "scene.toml"))
+        for _ in range(int(final["step"])):
+            simulation.advance()
+        for name in ("x", "v", "stress", "strain", "volume"):
+            assert np.array_equal(final[name], getattr(simulation.particles, name)), (trial, name)
+
+
+def test_a_signal_waits_for_the_step_and_a_second_one_does_not():
+    from femgrid_mpm.cli.signals import HANDLED, Interrupted, RunSignals
+
+    handlers = {signum: signal.getsignal(signum) for signum in HANDLED}
+    try:
+        with RunSignals() as signals:
+            signals.arm(at_step_ends=True)
+            os.kill(os.getpid(), signal.SIGTERM)  # recorded: the step goes on
+            with pytest.raises(Interrupted) as first:
+                signals.step_ended()
+            assert first.value.signum == signal.SIGTERM and not first.value.mid_step
+        for signum, handler in handlers.items():  # the context leaves them ignored, as a command ends
+            signal.signal(signum, handler)
+        with RunSignals() as signals:
+            signals.arm(at_step_ends=True)
+            os.kill(os.getpid(), signal.SIGINT)
+            with pytest.raises(Interrupted) as second:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(1)  # the handler runs between two bytecodes of this thread
+            assert second.value.signum == signal.SIGINT and second.value.mid_step
+    finally:
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
+
+
 def test_signals_during_the_shutdown_do_not_cut_it(tmp_path):
     """A burst of 30 SIGINTs and SIGTERMs 2 ms apart, from the first on: the first
     interrupts, the rest fall on the shutdown and are ignored; exit 130, files whole."""

@@ -140,11 +140,17 @@ def run_interruptibly(simulation, outputs, progress: bool, signals: RunSignals):
                              {"scene_sha256": digest, "simulation": values, "outputs": outputs.state()})
 
     bar, update = progress_bar(simulation, enabled=progress and sys.stderr.isatty())
+
+    def step_ended(step: int, time: float) -> None:
+        if update is not None:
+            update(step, time)
+        signals.step_ended()
+
     try:
         try:
-            signals.arm()
+            signals.arm(at_step_ends=True)
             try:
-                outcome = simulation.run(progress=update, checkpoint=checkpoint,
+                outcome = simulation.run(progress=step_ended, checkpoint=checkpoint,
                                          checkpoint_every=outputs.checkpoint_every)
             finally:
                 if bar is not None:
@@ -176,6 +182,8 @@ def finish(simulation, outputs, outcome) -> int:
         return EXIT_STOPPED
     if isinstance(outcome, Interrupted):
         where = f"at step {simulation.step_index} (t = {simulation.time:.6g} s)"
+        if outcome.mid_step:
+            where += f", part way through step {simulation.step_index + 1} (a second signal)"
         by = "" if outcome.signum == signal.SIGINT else f" by {outcome.name}"
         try:
             outputs.finish(simulation.result("interrupted", f"interrupted {where}{by}"))

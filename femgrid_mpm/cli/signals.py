@@ -21,11 +21,14 @@ HANDLED = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGHUP: 129}
 class Interrupted(KeyboardInterrupt):
     """A run ended by a signal (Ctrl-C, ``kill``, a closed terminal)."""
 
-    def __init__(self, signum: int):
+    def __init__(self, signum: int, mid_step: bool = False):
         super().__init__(signum)
         self.signum = signum
         self.name = signal.Signals(signum).name
         self.exit_code = HANDLED.get(signum, 128 + signum)
+        #: raised inside a step (a second signal before the step under way ended): the points
+        #: may hold part of that step
+        self.mid_step = mid_step
 
 
 class RunSignals:
@@ -40,6 +43,7 @@ class RunSignals:
     def __init__(self):
         self.received: int | None = None
         self.armed = False
+        self.at_step_ends = False
         self.raised = False
         self._previous: dict = {}
 
@@ -64,21 +68,30 @@ class RunSignals:
         self._previous.clear()
 
     def _handle(self, signum, frame) -> None:
-        if self.received is None:
+        first = self.received is None
+        if first:
             self.received = signum
-        if self.armed:
-            self._raise()
+        if self.armed and not (self.at_step_ends and first):  # a second one does not wait
+            self._raise(mid_step=self.at_step_ends)
 
-    def _raise(self) -> None:
+    def _raise(self, mid_step: bool = False) -> None:
         self.armed = False
         if not self.raised:
             self.raised = True
-            raise Interrupted(self.received)
+            raise Interrupted(self.received, mid_step)
 
-    def arm(self) -> None:
-        """Let a signal raise :class:`Interrupted`; one received while calm is raised now."""
-        self.armed = True
+    def arm(self, at_step_ends: bool = False) -> None:
+        """Let a signal raise :class:`Interrupted`; one received while calm is raised now.
+        ``at_step_ends``: the first one waits for :meth:`step_ended` (a step cut part way
+        would leave the points half moved: stresses of one step, positions of the last), a
+        second one raises at once (a step that does not end: a long first compilation)."""
+        self.armed, self.at_step_ends = True, at_step_ends
         if self.received is not None:
+            self._raise()
+
+    def step_ended(self) -> None:
+        """Between two steps: raise the signal that came during the step."""
+        if self.armed and self.received is not None:
             self._raise()
 
     def calm(self) -> None:
