@@ -299,6 +299,7 @@ class Simulation:
 
     # -- running ---------------------------------------------------------------
 
+    @np.errstate(over="ignore", invalid="ignore")  # a number beyond 1e308 is inf: the guards say what happened
     def run(
         self,
         progress: Callable[[int, float], None] | None = None,
@@ -387,8 +388,7 @@ class Simulation:
     # -- state, for checkpoints -------------------------------------------------
 
     def state(self) -> tuple[dict, dict]:
-        """Everything that carries from one step to the next, ``(arrays, values)``
-        (see :func:`femgrid_mpm.state.simulation_state`)."""
+        """What carries from one step to the next, ``(arrays, values)`` (:func:`~femgrid_mpm.state.simulation_state`)."""
         return simulation_state(self, clock.perf_counter())
 
     def restore(self, arrays: dict, values: dict) -> None:

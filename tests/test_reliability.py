@@ -77,7 +77,8 @@ def cli_process(*argv, **options) -> subprocess.Popen:
     """``femgrid-mpm ARGV`` in its own process, SIGINT handled as in a terminal."""
     options.setdefault("stdout", subprocess.DEVNULL)
     options.setdefault("stderr", subprocess.PIPE)
-    return subprocess.Popen([sys.executable, "-m", "femgrid_mpm.cli", *map(str, argv)], env=ENV, cwd=ROOT,
+    options.setdefault("env", ENV)
+    return subprocess.Popen([sys.executable, "-m", "femgrid_mpm.cli", *map(str, argv)], cwd=ROOT,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **options)
 
 
@@ -240,6 +241,29 @@ def test_stdout_on_a_full_device_is_exit_1_in_one_line(block_file):
         err = process.communicate(timeout=120)[1].decode()
     assert process.returncode == cli.EXIT_WRITE_FAILED
     assert err.splitlines() == ["femgrid-mpm: error: cannot write to standard output: No space left on device"]
+
+
+def test_a_completed_run_whose_line_cannot_be_written_is_exit_1(tmp_path, block_file):
+    """The outputs are complete, but its line is lost: exit 1 (was 0 with a warning; the docs
+    and `sweep` said 1)."""
+    with open("/dev/full", "w") as full:
+        process = cli_process("run", block_file, "--out", tmp_path / "out", "--no-progress", stdout=full)
+        err = process.communicate(timeout=300)[1].decode()
+    assert process.returncode == cli.EXIT_WRITE_FAILED
+    assert err.splitlines() == [f"femgrid-mpm: error: the run completed (outputs in {tmp_path / 'out'}) but standard "
+                                "output cannot be written: No space left on device"]
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["status"] == "completed"
+
+
+def test_a_title_that_stdout_cannot_encode_is_escaped(tmp_path, block_file):
+    """PYTHONIOENCODING=ascii (a non-UTF-8 locale) and a title "café": a UnicodeEncodeError
+    traceback from `info`, exit 1."""
+    scene = tmp_path / "cafe.toml"
+    scene.write_text(Path(block_file).read_text().replace('title = "block"', 'title = "café"', 1))
+    process = cli_process("info", scene, stdout=subprocess.PIPE, env={**ENV, "PYTHONIOENCODING": "ascii"})
+    out, err = (stream.decode() for stream in process.communicate(timeout=120))
+    assert process.returncode == 0 and err == ""
+    assert "caf\\xe9" in out
 
 
 @pytest.mark.parametrize("command", ["info", "run", "help"])

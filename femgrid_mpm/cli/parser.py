@@ -174,7 +174,11 @@ def emit(text: str) -> None:
     """A line on stdout, flushed.  A reader that went away (a closed pipe: ``| head -1``)
     ends the output quietly; any other failure raises :class:`StdoutFailed`."""
     try:
-        print(text, flush=True)
+        try:
+            print(text, flush=True)
+        except UnicodeEncodeError:  # a terminal or locale that cannot show a scene's title: escaped
+            encoding = sys.stdout.encoding or "ascii"
+            print(text.encode(encoding, "backslashreplace").decode(encoding), flush=True)
     except BrokenPipeError:
         discard(sys.stdout)
     except OSError as error:

@@ -195,10 +195,11 @@ def finish(simulation, outputs, outcome) -> int:
         outputs.finish(outcome)
     except OSError as error:
         return write_failed(out, error)
-    try:  # the outputs are complete: a stdout that cannot take this line changes nothing
+    try:  # the outputs are complete; a script reading the exit code learns that the line was lost
         emit(f"{outcome.message}: {simulation.step_index} steps in {simulation.wall_time:.3g} s; outputs in {out}")
     except StdoutFailed as error:
-        say("warning", f"the run completed (outputs in {out}) but standard output cannot be written: {error}")
+        say("error", f"the run completed (outputs in {out}) but standard output cannot be written: {error}")
+        return EXIT_WRITE_FAILED
     return EXIT_DONE
 
 

@@ -24,7 +24,8 @@ class Gravity(Effect):
 
     def bind(self, simulation):
         g = np.asarray(self.acceleration, dtype=float)
-        weight = simulation.particles.mass[:, None] * g  # constant: computed once
+        with np.errstate(over="ignore"):  # beyond 1e308: inf, and the state guard stops the run
+            weight = simulation.particles.mass[:, None] * g  # constant: computed once
 
         def add_gravity(ctx: StepContext) -> None:
             ctx.add_point_forces(self.name, weight)
