@@ -305,6 +305,10 @@ def test_resume_of_a_finished_run_is_refused_and_keeps_its_outputs(tmp_path, cap
     # well-formed but edited by hand: refused before any file is rewritten (particles.pvd was cut first)
     ("energy rows edited", "energy.rows: shape (15, 3), the energy record has 9 columns"),  # records 0-140
     ("step edited", "step -50, this scene runs steps 0 to 167"),
+    # values of the wrong type where the checks did not look: a traceback, or taken as they were
+    ("energy initial edited", "does not fit"),
+    ("series name edited", "series 'particles': entry (0.0, '<bad\"&name>') is not one it writes"),
+    ("checkpoint_every edited", "checkpoint_every -3 is not a whole number of steps"),
 ])
 def test_resume_refuses_bad_checkpoints_in_one_line(tmp_path, capsys, damage, words):
     out = tmp_path / "out"
@@ -342,6 +346,17 @@ def test_resume_refuses_bad_checkpoints_in_one_line(tmp_path, capsys, damage, wo
         arrays, values = read_checkpoint(checkpoint)
         values.pop("format")
         write_checkpoint(checkpoint, arrays, {**values, "simulation": {**values["simulation"], "step": -50}})
+    elif damage.endswith("edited") and damage.split()[0] in ("energy", "series", "checkpoint_every"):
+        arrays, values = read_checkpoint(checkpoint)
+        values.pop("format")
+        simulation, outputs = values["simulation"], values["outputs"]
+        if damage == "energy initial edited":
+            simulation = {**simulation, "energy_initial": [1, 2]}
+        elif damage == "series name edited":
+            outputs = {**outputs, "series": {"particles": [[0.0, '<bad"&name>']]}}
+        else:
+            outputs = {**outputs, "checkpoint_every": -3}
+        write_checkpoint(checkpoint, arrays, {**values, "simulation": simulation, "outputs": outputs})
     before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()} if out.exists() else {}
     code, stdout, err = run_cli(["resume", out], capsys)
     assert code == cli.EXIT_BAD_INPUT and stdout == ""

@@ -76,7 +76,7 @@ def resume(args) -> int:
     try:
         outputs = RunOutputs.resumed(directory, scene, values["outputs"])
     except (KeyError, TypeError, ValueError, ArithmeticError) as error:
-        raise BadInput(f"{directory / CHECKPOINT_FILE}: not a readable checkpoint (outputs: {error!r})") from None
+        raise BadInput(f"{directory / CHECKPOINT_FILE}: not a readable checkpoint (outputs: {type(error).__name__}: {error})") from None
     try:
         outputs.check(starting=False)
     except OutputRefused as error:

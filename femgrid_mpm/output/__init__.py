@@ -54,6 +54,8 @@ True
 
 from __future__ import annotations
 
+import math
+import re
 from pathlib import Path
 
 from ..step import Stage
@@ -273,13 +275,20 @@ class RunOutputs:
     def resumed(cls, directory, scene, state: dict, flush_seconds: float = 1.0) -> "RunOutputs":
         """The outputs of a run in ``directory`` continued from a checkpoint with ``state``
         (:meth:`state`); call :meth:`resume` once the simulation is restored."""
+        every = state["checkpoint_every"]
+        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+            raise ValueError(f"checkpoint_every {every!r} is not a whole number of steps, at least 1")
         outputs = cls(directory, scene, source=state["scene_file"], overrides=state["overrides"],
-                      flush_seconds=flush_seconds, checkpoint_every=state["checkpoint_every"])
+                      flush_seconds=flush_seconds, checkpoint_every=every)
         series = state["series"]
         if isinstance(series, list):  # a checkpoint of the particle series alone
             series = {ParticleSeries.name: series}
         outputs._series_state = {str(observer): [(float(time), str(name)) for time, name in entries]
                                  for observer, entries in series.items()}
+        for observer, entries in outputs._series_state.items():
+            for time, name in entries:  # the names go into the .pvd's XML and name the files it reads
+                if not (math.isfinite(time) and re.fullmatch(rf"{re.escape(observer)}/{re.escape(observer)}_\d+\.vtu", name)):
+                    raise ValueError(f"series {observer!r}: entry ({time!r}, {name[:80]!r}) is not one it writes")
         return outputs
 
     def resume(self, simulation) -> None:
