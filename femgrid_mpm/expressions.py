@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import ast
 import operator
+import unicodedata
 from functools import reduce
 from typing import Callable
 
@@ -141,10 +142,13 @@ def check_constants(constants: dict, variables: tuple[str, ...]) -> dict[str, fl
     for name, value in constants.items():
         if not isinstance(name, str) or not name.isidentifier() or name.startswith("_"):
             raise ExpressionError(f"constant name {name!r} is not a plain name (letters, digits, _; not starting with _)")
+        written, name = name, unicodedata.normalize("NFKC", name)  # as Python reads the expression's names
         if name in variables:
-            raise ExpressionError(f"constant {name!r} would hide the variable {name!r}")
+            raise ExpressionError(f"constant {written!r} would hide the variable {name!r}")
         if name in CONSTANTS or name in FUNCTIONS:
-            raise ExpressionError(f"constant {name!r} would hide the built-in {name!r}")
+            raise ExpressionError(f"constant {written!r} would hide the built-in {name!r}")
+        if name in checked:
+            raise ExpressionError(f"constant {written!r} is the constant {name!r} again (the same name to Python)")
         try:
             number = float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
         except OverflowError:

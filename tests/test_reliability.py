@@ -266,6 +266,19 @@ def test_a_title_that_stdout_cannot_encode_is_escaped(tmp_path, block_file):
     assert "caf\\xe9" in out
 
 
+def test_control_characters_of_a_scene_do_not_reach_the_terminal(tmp_path, block_file, capsys):
+    """An ESC in a title or a body's name reached the terminal raw (a command to it) in `info`'s
+    lines and in error messages."""
+    scene = tmp_path / "esc.toml"
+    text = Path(block_file).read_text().replace('title = "block"', 'title = "a\\u001b[2Jb"', 1)
+    scene.write_text(text)
+    code, out, err = run_cli(["info", scene], capsys)
+    assert code == 0 and "\x1b" not in out and "a\\x1b[2Jb" in out
+    code, out, err = run_cli(["info", scene, "--set", "bodies.0.name=b\u001b[2Jc", "--set", "bodies.0.upper=[99, 99]"],
+                             capsys)
+    assert code == cli.EXIT_BAD_INPUT and "\x1b" not in err and "b\\x1b[2Jc" in err and "outside the grid" in err
+
+
 @pytest.mark.parametrize("command", ["info", "run", "help"])
 def test_a_closed_pipe_on_stdout_ends_quietly_with_the_commands_code(tmp_path, block_file, command):
     """The reader has gone before anything is printed (it is closed at once, the libraries
@@ -418,6 +431,20 @@ def test_comparisons_in_arithmetic_count_as_one_and_zero(text, expected):
     a traceback when evaluated (a body force at its first step, the earlier outputs gone)."""
     value = compile_expression(text, ("x",))(x=np.array([0.0, 0.5, 1.5, 2.5]))
     assert value.dtype == float and value.tolist() == expected
+
+
+def test_constant_names_are_read_as_python_reads_the_expression():
+    """Python reads identifiers in NFKC form: a constant "ℯ" was taken, then ignored for e, and
+    "ｔ" for the variable t."""
+    from femgrid_mpm.expressions import check_constants
+
+    for constants, message in (({"ℯ": 5.0}, "constant 'ℯ' would hide the built-in 'e'"),
+                               ({"ｔ": 5.0}, "constant 'ｔ' would hide the variable 't'"),
+                               ({"w": 1.0, "ｗ": 2.0}, "constant 'ｗ' is the constant 'w' again")):
+        with pytest.raises(ExpressionError, match=message):
+            check_constants(constants, ("x", "t"))
+    constants = check_constants({"ｗ": 5.0}, ("x",))
+    assert compile_expression("ｗ + w", ("x",), constants=constants)(x=np.array([0.0]))[0] == 10.0
 
 
 def test_a_body_force_of_comparisons_runs(block_scene):

@@ -170,9 +170,18 @@ def discard(stream) -> None:
         pass
 
 
+def visible(text: str) -> str:
+    """``text`` with its control characters escaped (an ESC or a CR from a scene's title or a
+    body's name would reach the terminal as a command), line breaks and tabs kept."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() or c in "\n\t" else c.encode("unicode_escape").decode() for c in text)
+
+
 def emit(text: str) -> None:
     """A line on stdout, flushed.  A reader that went away (a closed pipe: ``| head -1``)
     ends the output quietly; any other failure raises :class:`StdoutFailed`."""
+    text = visible(text)
     try:
         try:
             print(text, flush=True)
@@ -194,7 +203,7 @@ def say(kind: str, message: str) -> None:
 
     try:
         with tqdm.external_write_mode(file=sys.stderr):
-            print(f"{PROG}: {kind}: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+            print(f"{PROG}: {kind}: {visible(' '.join(str(message).split()))}", file=sys.stderr, flush=True)
     except OSError:
         discard(sys.stderr)
 
