@@ -266,6 +266,19 @@ def test_a_title_that_stdout_cannot_encode_is_escaped(tmp_path, block_file):
     assert "caf\\xe9" in out
 
 
+def test_the_memory_check_counts_an_address_space_limit():
+    """`ulimit -v` was not counted (MemAvailable only): a scene passed the check and ran out of
+    memory mid-run, a MemoryError traceback after the earlier outputs were removed."""
+    import resource
+
+    limit = 3 * 2**30
+    code = "from femgrid_mpm.cli.scene_input import available_memory; print(available_memory())"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT, env=ENV,
+                          preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_AS, (limit, limit)))
+    assert done.returncode == 0, done.stderr
+    assert 0 < float(done.stdout) < limit
+
+
 def test_control_characters_of_a_scene_do_not_reach_the_terminal(tmp_path, block_file, capsys):
     """An ESC in a title or a body's name reached the terminal raw (a command to it) in `info`'s
     lines and in error messages."""

@@ -157,7 +157,7 @@ def run_interruptibly(simulation, outputs, progress: bool, signals: RunSignals):
                     bar.close()
         except SimulationStopped as stop:
             outcome = stop
-        except OSError as error:
+        except (OSError, MemoryError) as error:  # a full disk; an address-space limit met mid-run
             outcome = error
         signals.calm()
     except Interrupted as interrupt:  # raised once at most: any later signal is only recorded
@@ -173,6 +173,10 @@ def finish(simulation, outputs, outcome) -> int:
     out = outputs.directory
     if isinstance(outcome, OSError):
         return write_failed(out, outcome)
+    if isinstance(outcome, MemoryError):  # nothing more is written: that would need memory too
+        say("error", f"out of memory at step {simulation.step_index} (t = {simulation.time:.6g} s); the files "
+                     f"written so far are in {out}")
+        return EXIT_WRITE_FAILED
     if isinstance(outcome, SimulationStopped):
         try:
             outputs.finish(outcome.result, outcome)

@@ -83,11 +83,28 @@ def memory_need(scene) -> float:
 
 
 def available_memory() -> float | None:
-    """Bytes the system can give without swapping (Linux ``MemAvailable``), or None if unknown."""
+    """Bytes the system can give without swapping (Linux ``MemAvailable``), and no more than
+    this process may still map under its address-space limit (``ulimit -v``), or None if unknown."""
+    limits = [_proc_kilobytes("/proc/meminfo", "MemAvailable:")]
     try:
-        with open("/proc/meminfo") as meminfo:
-            for line in meminfo:
-                if line.startswith("MemAvailable:"):
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        mapped = _proc_kilobytes("/proc/self/status", "VmSize:")
+        if soft != resource.RLIM_INFINITY and mapped is not None:
+            limits.append(max(0.0, soft - mapped))
+    except (ImportError, OSError, ValueError):
+        pass
+    known = [limit for limit in limits if limit is not None]
+    return min(known) if known else None
+
+
+def _proc_kilobytes(path: str, field: str) -> float | None:
+    """A ``kB`` field of a /proc file, in bytes, or None."""
+    try:
+        with open(path) as lines:
+            for line in lines:
+                if line.startswith(field):
                     return float(line.split()[1]) * 1024.0
     except (OSError, ValueError, IndexError):
         pass
