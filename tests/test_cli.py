@@ -715,6 +715,22 @@ def test_write_failure_after_a_stop_is_one_line_exit_1(tmp_path, capsys, monkeyp
     assert "No space left on device" in line
 
 
+def test_a_full_disk_as_the_outputs_start_is_a_failed_write_not_bad_input(tmp_path, capsys, monkeypatch):
+    """The start ran into a full disk (``resume`` rewrites its .pvd and summary first): exit 2
+    said nothing had been written; it is exit 1, naming the directory."""
+    import femgrid_mpm.output as output
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(output, "write_summary", full_disk)
+    out = tmp_path / "out"
+    code, _, err = run_cli(["run", write_scene(tmp_path, block()), "--out", out], capsys)
+    assert code == cli.EXIT_WRITE_FAILED
+    (line,) = err.splitlines()
+    assert line == f"femgrid-mpm: error: cannot write the outputs in {out} before the first step: [Errno 28] No space left on device"
+
+
 def test_failed_start_removes_nothing_of_an_earlier_run(tmp_path, capsys, monkeypatch):
     """A second run into a directory whose particle series cannot be written: exit 2 and
     every file of the first run keeps its bytes (its energy.csv, final.npz and series

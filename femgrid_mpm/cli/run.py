@@ -7,6 +7,7 @@ far kept valid.
 
 from __future__ import annotations
 
+import errno
 import signal
 import sys
 from pathlib import Path
@@ -107,6 +108,10 @@ def run_status(directory: Path) -> dict | None:
     return summary if isinstance(summary, dict) else None
 
 
+#: what a directory refuses whole: bad input, not a write that failed part way
+REFUSED_PLACE = (errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOTDIR, errno.EISDIR, errno.ENAMETOOLONG, errno.ENOENT)
+
+
 def execute(simulation, outputs, progress: bool, begin, place: str) -> int:
     """Start the outputs (``begin``: :meth:`RunOutputs.start` or ``resume``; a failure is
     bad input at ``place``), run the simulation into them, writing checkpoints if asked,
@@ -117,7 +122,11 @@ def execute(simulation, outputs, progress: bool, begin, place: str) -> int:
         try:
             begin()  # calm: a signal meanwhile interrupts the run at its first step
         except OSError as error:
-            raise BadInput(f"{place}: cannot write there: {error.strerror or error}") from None
+            if error.errno in REFUSED_PLACE:  # nothing could be written there: the place is the problem
+                raise BadInput(f"{place}: cannot write there: {error.strerror or error}") from None
+            # a full disk, an I/O error: files may have been started (resume rewrites its .pvd
+            # and summary to the checkpoint first), so not exit 2's "nothing written"
+            return write_failed(outputs.directory, error, "before the first step")
         outcome = run_interruptibly(simulation, outputs, progress, signals)
         return finish(simulation, outputs, outcome)
 
