@@ -315,6 +315,8 @@ def node_count(lower, upper, spacing: float, cells_per_element: int) -> float:
 
 
 def _vector(name: str, value) -> np.ndarray:
+    if np.iscomplexobj(value):  # float() would drop the imaginary part
+        raise ValueError(f"{name} must be two finite numbers, got {value!r}")
     array = np.asarray(value, dtype=float)
     if array.shape != (2,) or not np.all(np.isfinite(array)):
         raise ValueError(f"{name} must be two finite numbers, got {value!r}")

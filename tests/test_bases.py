@@ -255,6 +255,7 @@ def test_nodes_where():
     (dict(basis="gimp", points_per_cell=0.5), "points_per_cell must be a whole number"),
     (dict(basis="gimp", points_per_cell="2"), "points_per_cell must be a whole number"),
     (dict(basis="q1", points_per_cell=True), "points_per_cell must be a whole number"),
+    (dict(lower=(0.0, 1j)), "lower must be two finite numbers"),  # its imaginary part was dropped
 ])
 def test_bad_grid_arguments(kwargs, message):
     arguments = dict(basis="q1", lower=(0.0, 0.0), upper=(1.0, 1.0), spacing=0.5) | kwargs
