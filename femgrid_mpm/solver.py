@@ -55,7 +55,7 @@ class Simulation:
     """
 
     def __init__(self, scene: Scene, observers: list | None = None):
-        self.scene = scene = Scene.model_validate(scene)  # a Scene as it is; a dict checked; else a SceneError
+        self.scene = scene = Scene.model_validate(scene)  # a dict or a Scene checked (model_copy checks nothing); SceneError
         spec = scene.grid
         # the points' size, for a basis whose weights depend on it (every body then shares it)
         self.grid = Grid(spec.basis, spec.lower, spec.upper, spec.spacing, scene.bodies[0].points_per_cell)
