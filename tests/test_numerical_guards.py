@@ -271,6 +271,7 @@ def test_energy_drift_is_recorded_and_warned_once():
     drifts = [w for w in caught if issubclass(w.category, EnergyDriftWarning)]
     assert len(drifts) == 1
     assert "time.safety" in str(drifts[0].message) and f"{expected:.3g}" in str(drifts[0].message)
+    assert drifts[0].filename == __file__  # the caller of run(), not a wrapper of it (numpy's errstate)
 
 
 def test_the_advice_lowers_the_drift():
