@@ -35,7 +35,7 @@ from ..grid import MAX_NODES, length_problem, node_count
 from ..particles import count_rectangle
 from .limits import MAX_RECORD_BYTES, MAX_STEPS, step_count
 from .messages import _shown
-from .validation import SceneError, validated
+from .validation import CHECKING, SceneError, validated
 
 #: Largest number of material points accepted, checked before allocating.
 MAX_POINTS = 100_000_000
@@ -342,6 +342,11 @@ class Scene(_Model):
             raise ValueError(f"solver.{key}: 'reconstructed' is implemented for one shared field, "
                              "not for 'frictional' contact")
 
+    def __init__(self, **data):
+        if not CHECKING.get():  # Scene(**tables): strict as a file (pydantic would take "1e4" for 1e4)
+            validated(type(self), data, {}, "scene")
+        super().__init__(**data)
+
     @classmethod
     def model_validate(cls, obj, **options) -> "Scene":
         """The scene of ``obj``, a dict of a scene file's tables (or a Scene), checked as a file is
@@ -369,16 +374,10 @@ class Scene(_Model):
         return count_rectangle(body.lower, body.upper, self.grid.spacing, body.points_per_cell)
 
     def with_overrides(self, **changes) -> "Scene":
-        """A copy with dotted keys replaced, validated again.
-
-        Keys are paths into the scene file, list items by index:
-        ``scene.with_overrides(**{"grid.basis": "q2", "bodies.0.points_per_cell": 4})``.
-
-        Raises
-        ------
-        SceneError
-            One line naming the key, as for a scene file (a wrong type included).
-        """
+        """A copy with dotted keys replaced, validated again; :class:`SceneError`, one line naming
+        the key as for a scene file (a wrong type included), if it does not hold.  Keys are paths
+        into the scene file, list items by index:
+        ``scene.with_overrides(**{"grid.basis": "q2", "bodies.0.points_per_cell": 4})``."""
         data = self.model_dump(mode="json", exclude_none=True)
         source = "with " + ", ".join(f"{key} = {_shown(value)}" for key, value in changes.items())
         return validated(type(self), data, changes, source)

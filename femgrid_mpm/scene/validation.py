@@ -8,11 +8,18 @@ TOML type that pydantic would convert, and one-line errors
 
 from __future__ import annotations
 
+from contextvars import ContextVar
+
 from .messages import _one_line, _shown, describe_validation_error
 
 
 class SceneError(ValueError):
     """A scene file that cannot be used; the message is one line naming file and key."""
+
+
+#: set while :func:`validated` builds a model: the Scene's own ``__init__`` (which pydantic's
+#: validation calls) then only builds it; called directly, it checks its data as a file first
+CHECKING: ContextVar[bool] = ContextVar("femgrid_mpm_scene_checking", default=False)
 
 
 def validated(model, data: dict, overrides: dict, source: str):
@@ -30,6 +37,7 @@ def validated(model, data: dict, overrides: dict, source: str):
     deep = _nested_too_deep(data)
     if deep is not None:
         raise SceneError(f"{source}: {deep}: nested more than {MAX_DEPTH} levels deep (no scene key is)")
+    checking = CHECKING.set(True)
     try:
         # pydantic's own validation (the model's ``model_validate`` comes back here)
         scene = model.__pydantic_validator__.validate_python(data)
@@ -37,6 +45,8 @@ def validated(model, data: dict, overrides: dict, source: str):
         raise SceneError(_one_line(f"{source}: {describe_validation_error(error, model)}")) from None
     except ValueError as error:  # raised by our own checks outside pydantic's wrapping
         raise SceneError(_one_line(f"{source}: {error}")) from None
+    finally:
+        CHECKING.reset(checking)
     problem = _converted_value(data, scene.model_dump(), "")
     if problem:
         raise SceneError(_one_line(f"{source}: {problem}"))
