@@ -511,6 +511,21 @@ def test_the_python_api_refuses_in_one_scene_error_line(value, words):
         assert str(error.value).startswith(words) and "\n" not in str(error.value)
 
 
+def test_a_scene_built_directly_is_checked_as_a_file():
+    """Scene(**tables) took pydantic's lax path: "1e4" for a modulus, true for points per cell,
+    and a multi-line ValidationError for a table that is not one."""
+    tables = bundled_scene("vibrating_bar").model_dump(mode="json", exclude_none=True)
+    assert Scene(**tables) == bundled_scene("vibrating_bar")
+    body = tables["bodies"][0]
+    for changed, words in (({"bodies": [{**body, "material": {**body["material"], "E": "1e4"}}]},
+                            'scene: bodies[0].material.E: must be a number (got "1e4")'),
+                           ({"bodies": [{**body, "points_per_cell": True}]}, "scene: bodies[0].points_per_cell: must be"),
+                           ({"grid": 1}, "scene: grid: must be a table (got 1)")):
+        with pytest.raises(SceneError) as error:
+            Scene(**{**tables, **changed})
+        assert str(error.value).startswith(words) and "\n" not in str(error.value)
+
+
 def test_a_scene_changed_by_model_copy_is_checked_by_the_simulation():
     """pydantic's model_copy(update=...) checks nothing: a step of -1 s (a dict where a table's
     model goes) ran into an AttributeError inside the simulation."""
