@@ -536,6 +536,8 @@ def test_a_scene_changed_by_model_copy_is_checked_by_the_simulation():
         with pytest.raises(SceneError, match=r"^scene: time.dt: must be greater than 0 or 'auto' \(got -1\)"):
             Simulation(bad)
     assert Scene.model_validate(scene) is scene
+    loose = scene.model_copy(update={"time": scene.time.model_dump()})  # a valid table as a dict
+    assert Simulation(loose).scene == scene and Simulation(loose).scene.time.dt == scene.time.dt
 
 
 # -- signals -------------------------------------------------------------------------------------
@@ -631,6 +633,15 @@ def test_a_signal_waits_for_the_step_and_a_second_one_does_not():
                 os.kill(os.getpid(), signal.SIGINT)
                 time.sleep(1)  # the handler runs between two bytecodes of this thread
             assert second.value.signum == signal.SIGINT and second.value.mid_step
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
+        with RunSignals() as signals:  # a step that does not end (a first compilation): STEP_WAIT at most
+            signals.arm(at_step_ends=True)
+            started = time.monotonic()
+            with pytest.raises(Interrupted) as waited:
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(30)
+            assert waited.value.mid_step and 1.9 < time.monotonic() - started < 10
     finally:
         for signum, handler in handlers.items():
             signal.signal(signum, handler)

@@ -54,6 +54,11 @@ def main(argv: list[str] | None = None) -> int:
             code = interrupted(interrupt.signum)
         except KeyboardInterrupt:  # Python's own, where a signal is not ours to handle
             code = interrupted(signal.SIGINT)
+        except Exception:  # noqa: BLE001 -- ours raised where a library swallows it (numba's
+            # compiler callbacks), which then fails on: the signal is what ended the command
+            if signals.received is None:
+                raise
+            code = interrupted(signals.received)
         if code == EXIT_INTERRUPTED and signals.received is not None:
             # a command that ends a Ctrl-C its own way (sweep) returns 130 whatever the signal
             code = HANDLED[signals.received]

@@ -11,9 +11,12 @@ raises it then.
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 
+#: the longest a signal waits for the step under way to end (s)
+STEP_WAIT = 2.0
 #: the signals that end a run as an interrupt, and their exit codes (128 + the number)
 HANDLED = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGHUP: 129}
 
@@ -46,6 +49,7 @@ class RunSignals:
         self.at_step_ends = False
         self.raised = False
         self._previous: dict = {}
+        self._timer: threading.Timer | None = None
 
     def __enter__(self) -> "RunSignals":
         if threading.current_thread() is threading.main_thread():
@@ -71,11 +75,19 @@ class RunSignals:
         first = self.received is None
         if first:
             self.received = signum
-        if self.armed and not (self.at_step_ends and first):  # a second one does not wait
+        if self.armed and self.at_step_ends and first:
+            # the step under way ends first, but a supervisor's SIGTERM waits no more than
+            # STEP_WAIT seconds for it (a first step compiles its kernels: 20-30 s)
+            self._timer = threading.Timer(STEP_WAIT, os.kill, (os.getpid(), signum))
+            self._timer.daemon = True
+            self._timer.start()
+        elif self.armed:  # a second one, or the wait's end: at once
             self._raise(mid_step=self.at_step_ends)
 
     def _raise(self, mid_step: bool = False) -> None:
         self.armed = False
+        if self._timer is not None:
+            self._timer.cancel()
         if not self.raised:
             self.raised = True
             raise Interrupted(self.received, mid_step)
@@ -84,7 +96,8 @@ class RunSignals:
         """Let a signal raise :class:`Interrupted`; one received while calm is raised now.
         ``at_step_ends``: the first one waits for :meth:`step_ended` (a step cut part way
         would leave the points half moved: stresses of one step, positions of the last), a
-        second one raises at once (a step that does not end: a long first compilation)."""
+        second one, or the end of :data:`STEP_WAIT` seconds, raises at once (a step that does not
+        end soon: a first compilation)."""
         self.armed, self.at_step_ends = True, at_step_ends
         if self.received is not None:
             self._raise()
@@ -97,3 +110,5 @@ class RunSignals:
     def calm(self) -> None:
         """Signals from now on are recorded only."""
         self.armed = False
+        if self._timer is not None:
+            self._timer.cancel()

@@ -358,8 +358,8 @@ class Scene(_Model):
             with warnings.catch_warnings():  # pydantic's warning of such a copy's unexpected types
                 warnings.simplefilter("ignore")
                 data = obj.model_dump(mode="json", exclude_none=True)
-            validated(cls, data, {}, "scene")
-            return obj
+            checked = validated(cls, data, {}, "scene")
+            return obj if checked == obj else checked  # (a dict where a table's model goes: the model)
         if not isinstance(obj, dict):
             raise SceneError(f"scene: must be a dict of the tables of a scene file, got {type(obj).__name__}")
         return validated(cls, obj, {}, "scene")
