@@ -225,9 +225,10 @@ class _Compiler:
         )
 
     def number(self, node: ast.AST) -> Evaluator:
-        """An operand of arithmetic: a comparison or a logical operation counts as 1.0 or 0.0
-        (numpy refuses ``-`` on booleans: ``(x < 1) - (x > 2)`` and ``-(x < 1)`` failed when
-        evaluated, after the scene had been taken)."""
+        """An operand of ``-`` (either), unary ``-`` or ``+``: a comparison or a logical operation
+        counts as 1.0 or 0.0 (numpy refuses them on booleans: ``(x < 1) - (x > 2)`` and
+        ``-(x < 1)`` failed when evaluated, after the scene had been taken).  Elsewhere booleans
+        stay numpy's (``(x <= 0) + (x >= 10)`` is a node condition, their logical or)."""
         evaluate = self.visit(node)
         if isinstance(node, (ast.Compare, ast.BoolOp)) or (isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not)):
             return lambda values: np.asarray(evaluate(values), dtype=float)
@@ -237,7 +238,8 @@ class _Compiler:
         op = _BINARY.get(type(node.op))
         if op is None:
             raise self.fail(f"the operator {type(node.op).__name__}")
-        left, right = self.number(node.left), self.number(node.right)
+        operand = self.number if isinstance(node.op, ast.Sub) else self.visit
+        left, right = operand(node.left), operand(node.right)
         return lambda values: op(left(values), right(values))
 
     def visit_UnaryOp(self, node: ast.UnaryOp) -> Evaluator:

@@ -343,22 +343,21 @@ class Simulation:
         self._run_started = start  # for the wall time in a checkpoint
         ending = "reached t = {time:.6g} s"
         try:
-            with np.errstate(over="ignore", invalid="ignore"):  # beyond 1e308: inf, and the guards say so
-                while self.step_index < self.n_steps:
-                    self.advance(record=bool(self.every) and self.step_index % self.every == 0)
-                    if progress is not None:
-                        progress(self.step_index, self.time)
-                    if self._at_rest():
-                        ending = "at rest at t = {time:.6g} s (no point faster than time.rest_speed)"
-                        break
-                    if checkpoint is not None and checkpoint_every and self.step_index % checkpoint_every == 0 \
-                            and self.step_index < self.n_steps:
-                        checkpoint(self)
-                if self.every or self.recorders:  # the last record: the state at the end
-                    self.project()
-                    self._run(Stage.OBSERVE)
-                # the guards see the state the run ends with, as they saw every step's start
-                self._guard_energy(recorded=bool(self.every))
+            while self.step_index < self.n_steps:
+                self.advance(record=bool(self.every) and self.step_index % self.every == 0)
+                if progress is not None:
+                    progress(self.step_index, self.time)
+                if self._at_rest():
+                    ending = "at rest at t = {time:.6g} s (no point faster than time.rest_speed)"
+                    break
+                if checkpoint is not None and checkpoint_every and self.step_index % checkpoint_every == 0 \
+                        and self.step_index < self.n_steps:
+                    checkpoint(self)
+            if self.every or self.recorders:  # the last record: the state at the end
+                self.project()
+                self._run(Stage.OBSERVE)
+            # the guards see the state the run ends with, as they saw every step's start
+            self._guard_energy(recorded=bool(self.every))
         except SimulationStopped as stop:
             self.wall_time += clock.perf_counter() - start
             self.outcome = "stopped"

@@ -72,6 +72,8 @@ def restore_state(simulation, arrays: dict, values: dict) -> None:
 
 def _check(simulation, arrays: dict, values: dict) -> None:
     """Raise ValueError naming what of ``(arrays, values)`` does not fit ``simulation``."""
+    if simulation.outcome is not None:  # its result holds the arrays a restore would overwrite
+        raise ValueError(f"this simulation's run has {simulation.outcome}: restore into a new Simulation of the scene")
     p = simulation.particles
     for name in p.__dataclass_fields__:
         if f"particles.{name}" not in arrays:

@@ -152,6 +152,8 @@ def test_a_finished_run_takes_no_more_steps_and_its_result_stays(block_scene):
     x = result.particles.x.copy()
     with pytest.raises(ValueError, match=r"has completed \(step 5, t = 0.05 s\): it takes no more steps"):
         simulation.advance()
+    with pytest.raises(ValueError, match="has completed: restore into a new Simulation"):
+        simulation.restore(*Simulation(block_scene(end=0.05, every=1)).state())
     assert simulation.step_index == 5 and np.array_equal(result.particles.x, x)
 
 

@@ -281,12 +281,16 @@ def test_the_memory_check_counts_an_address_space_limit():
 
 def test_control_characters_of_a_scene_do_not_reach_the_terminal(tmp_path, block_file, capsys):
     """An ESC in a title or a body's name reached the terminal raw (a command to it) in `info`'s
-    lines and in error messages."""
+    lines and in error messages; a no-break space, a joiner or a tab is text and stays."""
     scene = tmp_path / "esc.toml"
     text = Path(block_file).read_text().replace('title = "block"', 'title = "a\\u001b[2Jb"', 1)
     scene.write_text(text)
     code, out, err = run_cli(["info", scene], capsys)
     assert code == 0 and "\x1b" not in out and "a\\x1b[2Jb" in out
+    from femgrid_mpm.cli.parser import visible
+
+    typeset = "Poutre\u00a0: 10\u202f000 points, \u00e9moji \U0001f469\u200d\U0001f52c\t(\u202eevil)"
+    assert visible(typeset) == typeset.replace("\u202e", "\\u202e")  # text stays text; an override is escaped
     code, out, err = run_cli(["info", scene, "--set", "bodies.0.name=b\u001b[2Jc", "--set", "bodies.0.upper=[99, 99]"],
                              capsys)
     assert code == cli.EXIT_BAD_INPUT and "\x1b" not in err and "b\\x1b[2Jc" in err and "outside the grid" in err
@@ -438,12 +442,14 @@ def test_min_max_state_their_real_argument_limits():
     ("(x < 1) - (x > 2)", [1.0, 1.0, 0.0, -1.0]), ("-(x < 1)", [-1.0, -1.0, 0.0, 0.0]),
     ("+(x <= 0)", [1.0, 0.0, 0.0, 0.0]), ("(x < 1 and x > 0) - 1", [-1.0, 0.0, -1.0, -1.0]),
     ("-(not (x < 1))", [0.0, 0.0, -1.0, -1.0]), ("(x < 1) * 2", [2.0, 2.0, 0.0, 0.0]),
+    # booleans stay numpy's elsewhere: a node condition's logical or and and, as before
+    ("(x <= 0) + (x >= 2)", [True, False, False, True]), ("(x <= 1) * (x >= 0.5)", [False, True, False, False]),
 ])
 def test_comparisons_in_arithmetic_count_as_one_and_zero(text, expected):
     """numpy refuses ``-`` on booleans: these passed the scene's checks and stopped the run with
     a traceback when evaluated (a body force at its first step, the earlier outputs gone)."""
     value = compile_expression(text, ("x",))(x=np.array([0.0, 0.5, 1.5, 2.5]))
-    assert value.dtype == float and value.tolist() == expected
+    assert value.dtype == (bool if isinstance(expected[0], bool) else float) and value.tolist() == expected
 
 
 def test_constant_names_are_read_as_python_reads_the_expression():

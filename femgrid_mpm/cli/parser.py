@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import unicodedata
 from pathlib import Path
 
 PROG = "femgrid-mpm"
@@ -170,12 +171,18 @@ def discard(stream) -> None:
         pass
 
 
+#: the direction overrides and isolates of Unicode, which reorder what a terminal shows after them
+_BIDI_CONTROLS = set("\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069")
+
+
 def visible(text: str) -> str:
     """``text`` with its control characters escaped (an ESC or a CR from a scene's title or a
-    body's name would reach the terminal as a command), line breaks and tabs kept."""
+    body's name would reach the terminal as a command; a direction override would reorder the
+    line), line breaks and tabs kept, other text (no-break spaces, joiners) as it is."""
     if text.isprintable():
         return text
-    return "".join(c if c.isprintable() or c in "\n\t" else c.encode("unicode_escape").decode() for c in text)
+    return "".join(c.encode("unicode_escape").decode() if (unicodedata.category(c) == "Cc" and c not in "\n\t")
+                   or c in _BIDI_CONTROLS else c for c in text)
 
 
 def emit(text: str) -> None:

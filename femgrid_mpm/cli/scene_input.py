@@ -79,7 +79,9 @@ BYTES_PER_POINT, BYTES_PER_NODE = 300, 100
 def memory_need(scene) -> float:
     """A lower bound of the bytes a run of ``scene`` needs (counted, nothing allocated)."""
     points = sum(scene.point_count(index) for index in range(len(scene.bodies)))
-    return BYTES_PER_POINT * points + BYTES_PER_NODE * scene.node_count()
+    # threads: each chunk of points sums into its own copy of 8 numbers a node
+    threads = scene.solver.threads if scene.solver.threads > 1 else 0
+    return BYTES_PER_POINT * points + (BYTES_PER_NODE + 64 * threads) * scene.node_count()
 
 
 def available_memory() -> float | None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
+import numpy as np
 from pydantic import NonNegativeFloat
 from pydantic.dataclasses import dataclass
 
@@ -31,6 +32,7 @@ class MassDamping(Effect):
         c = float(self.coefficient)
 
         def damp(ctx: StepContext) -> None:
-            ctx.add_force(self.name, -c * ctx.mass.apply(ctx.velocity))
+            with np.errstate(over="ignore"):  # beyond 1e308: inf, and the state guard stops the run
+                ctx.add_force(self.name, -c * ctx.mass.apply(ctx.velocity))
 
         return damp
