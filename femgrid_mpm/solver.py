@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from .diagnostics import (EnergyGuard, NegativeMassMonitor, SimulationStopped, fastest_point, first_not_finite,
-                          runaway_causes,
+                          at_rest, runaway_causes,
                           points_kinetic_energy, warn_of_a_long_step, warn_of_energy_drift)
 from .observers import EnergyBookkeeping, kinetic_energy
 from .effects.base import ForceNotFinite, Recorder, bound, checked_observers
@@ -99,6 +99,7 @@ class Simulation:
         self.time = 0.0
         self.wall_time = 0.0
         self._run_started = None
+        self._run_step = False  # set by run() for its own advance()
         #: "completed" or "stopped" once :meth:`run` has returned or raised (a second call is refused)
         self.outcome: str | None = None
         # a floor of 1e-9 x sum E V: the strain energy of a strain ~4.5e-5 throughout every body
@@ -190,9 +191,11 @@ class Simulation:
     def advance(self, record: bool = False) -> None:
         """One time step: the scheme's sub-steps (:mod:`femgrid_mpm.schemes`), each the paper's
         section 3.2 steps 1-11; the paper's scheme is one, the central difference started from v(0)."""
-        if self.outcome in ("completed", "stopped"):  # its result holds these arrays: they stay its end
+        if self.outcome in ("completed", "stopped") or (self.outcome == "begun" and not self._run_step):
+            # its result holds these arrays: they stay its end; run() under way takes its own steps
             raise ValueError(f"this simulation's run has {self.outcome} (step {self.step_index}, t = {self.time:.6g} s): "
-                             "it takes no more steps; run a new Simulation of the scene with a later end")
+                             "it takes no steps but run()'s; run a new Simulation of the scene for more")
+        self._run_step = False
         ctx, dt, scheme = self.project(), self.dt, self.scheme
         if record:
             self._run(Stage.OBSERVE)
@@ -344,10 +347,11 @@ class Simulation:
         ending = "reached t = {time:.6g} s"
         try:
             while self.step_index < self.n_steps:
+                self._run_step = True
                 self.advance(record=bool(self.every) and self.step_index % self.every == 0)
                 if progress is not None:
                     progress(self.step_index, self.time)
-                if self._at_rest():
+                if at_rest(self.scene.time, self.time, self.mass, self.context.velocity):
                     ending = "at rest at t = {time:.6g} s (no point faster than time.rest_speed)"
                     break
                 if checkpoint is not None and checkpoint_every and self.step_index % checkpoint_every == 0 \
@@ -373,18 +377,11 @@ class Simulation:
         warn_of_energy_drift(result.summary["energy_drift"])
         return result
 
-    def _at_rest(self) -> bool:
-        """The grid's mass-weighted RMS speed is below ``time.rest_speed``: the grid velocity moves
-        the points (Eq. 20), while FLIP leaves noise on the points' own that damping on the grid
-        never removes (cubic B-splines: ~1e-6 m/s); weighting by mass ignores nodes with a tiny share."""
-        rest_speed = self.scene.time.rest_speed
-        if rest_speed is None or self.time < self.scene.time.rest_after:
-            return False
-        lumped = np.maximum(self.mass.nodal_masses(), 0.0)
-        mean_square = np.sum(lumped[:, None] * self.context.velocity**2) / np.sum(lumped)
-        return bool(np.sqrt(mean_square) < rest_speed)
-
     # -- state, for checkpoints -------------------------------------------------
+
+    def __reduce_ex__(self, protocol):
+        raise TypeError("a Simulation (its engine's kernels and buffers, its mass model's factors) is not "
+                        "copied or pickled: take its state() and restore() it into a new Simulation of the scene")
 
     def state(self) -> tuple[dict, dict]:
         """What carries from one step to the next, ``(arrays, values)`` (:func:`~femgrid_mpm.state.simulation_state`)."""

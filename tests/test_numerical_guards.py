@@ -150,7 +150,7 @@ def test_a_finished_run_takes_no_more_steps_and_its_result_stays(block_scene):
     simulation = Simulation(block_scene(end=0.05, every=1))
     result = simulation.run()
     x = result.particles.x.copy()
-    with pytest.raises(ValueError, match=r"has completed \(step 5, t = 0.05 s\): it takes no more steps"):
+    with pytest.raises(ValueError, match=r"has completed \(step 5, t = 0.05 s\): it takes no steps but run\(\)'s"):
         simulation.advance()
     with pytest.raises(ValueError, match="has completed: restore into a new Simulation"):
         simulation.restore(*Simulation(block_scene(end=0.05, every=1)).state())
@@ -167,6 +167,8 @@ def test_run_called_again_while_it_runs_is_refused_and_an_interrupted_run_goes_o
         if step == 3:
             with pytest.raises(ValueError, match=r"has begun \(step 3"):
                 simulation.run()
+            with pytest.raises(ValueError, match=r"has begun \(step 3.*no steps but run\(\)'s"):
+                simulation.advance()  # it was taken: the run's count of steps included it
             refused.append(step)
         if step == 6 and len(refused) == 1:
             refused.append(step)
@@ -179,6 +181,22 @@ def test_run_called_again_while_it_runs_is_refused_and_an_interrupted_run_goes_o
     reference = Simulation(block_scene(end=0.1, every=1).with_overrides(**{"output.energy": True})).run()
     assert result.status == "completed" and len(simulation.energy.rows) == simulation.n_steps + 1
     assert np.array_equal(result.particles.x, reference.particles.x)
+
+
+def test_a_simulation_is_not_pickled_or_copied_but_its_state_is(block_scene):
+    """pickle failed on pydantic's mappingproxy, naming nothing of ours; copy.copy shared the
+    arrays of the points between the copy and the original."""
+    import copy
+    import pickle
+
+    simulation = Simulation(block_scene(end=0.05))
+    for attempt in (pickle.dumps, copy.copy, copy.deepcopy):
+        with pytest.raises(TypeError, match=r"not copied or pickled: take its state\(\) and restore\(\) it"):
+            attempt(simulation)
+    arrays, values = pickle.loads(pickle.dumps(simulation.state()))
+    other = Simulation(block_scene(end=0.05))
+    other.restore(arrays, values)
+    assert np.array_equal(other.run().particles.x, simulation.run().particles.x)
 
 
 # -- units slips -----------------------------------------------------------------------------------
