@@ -59,11 +59,21 @@ def fastest_point(particles, bodies) -> str:
 
 def first_not_finite(particles, bodies) -> str:
     """``; first at POINT``: the first point whose position, velocity or stress is NaN or Inf
-    (for a stop's message), or "" if none is."""
+    (for a stop's message); ``; first at POINT (its volume)`` where only another of the points'
+    arrays is (a volume can overflow while the motion stays finite); "" if none is."""
     p = particles
     bad = ~(np.isfinite(p.x).all(axis=1) & np.isfinite(p.v).all(axis=1) & np.isfinite(p.stress).all(axis=1))
     found = np.flatnonzero(bad)
-    return f"; first at {describe_point(p, bodies, int(found[0]))}" if found.size else ""
+    if found.size:
+        return f"; first at {describe_point(p, bodies, int(found[0]))}"
+    for name in (*p.__dataclass_fields__, "volume"):  # the volume: mass over a density that may be 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            values = np.asarray(getattr(p, name))
+        if values.dtype.kind == "f" and values.ndim and len(values) == p.n:
+            found = np.flatnonzero(~np.isfinite(values.reshape(p.n, -1)).all(axis=1))
+            if found.size:
+                return f"; first at {describe_point(p, bodies, int(found[0]))} (its {name})"
+    return ""
 
 
 class EnergyDriftWarning(RuntimeWarning):

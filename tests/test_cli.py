@@ -816,3 +816,17 @@ def test_ctrl_c_while_the_libraries_load_is_one_line(capsys, monkeypatch):
     monkeypatch.setattr(cli.parser, "build_parser", interrupted)
     assert cli.main(["info", "scene.toml"]) == cli.EXIT_INTERRUPTED
     assert capsys.readouterr().err == "femgrid-mpm: interrupted: stopped by the user\n"
+
+
+def test_a_run_stopped_at_step_0_lists_only_the_files_it_wrote(tmp_path, capsys):
+    """summary.json's "files" named particles.pvd for a run stopped before its first record
+    (serendipity's negative masses on the bar, at step 0): plot then said the scene did not ask
+    for particles."""
+    out = tmp_path / "out"
+    scene = Path(__file__).parents[1] / "femgrid_mpm" / "scenes" / "vibrating_bar.toml"
+    code, _, err = run_cli(["run", scene, "--basis", "serendipity", "--out", out, "--no-progress",
+                            "--set", "output.particles=true", "--set", "output.every=20"], capsys)
+    assert code == cli.EXIT_STOPPED, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stop"]["step"] == 0 and "particles.pvd" not in summary["files"]
+    assert all((out / name).is_file() for name in summary["files"])

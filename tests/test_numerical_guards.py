@@ -360,3 +360,17 @@ def test_a_runaway_body_force_stops_without_numpys_warnings(block_scene):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert np.isfinite(simulation.particles.mass).all() and simulation.particles.volume.shape == (simulation.particles.n,)
+
+
+def test_a_stop_names_the_point_whose_volume_is_not_finite(block_scene):
+    """A volume can overflow while the motion stays finite: the stop named no point."""
+    from femgrid_mpm.diagnostics import first_not_finite
+
+    simulation = Simulation(block_scene(end=0.05))
+    p, bodies = simulation.particles, simulation.scene.bodies
+    assert first_not_finite(p, bodies) == ""
+    p.density[3] = 0.0  # mass over it: an infinite volume
+    assert first_not_finite(p, bodies).startswith("; first at point 3 of body") and \
+        first_not_finite(p, bodies).endswith("(its volume)")
+    p.x[5, 1] = np.nan
+    assert "(its" not in first_not_finite(p, bodies) and "point 3 of body" not in first_not_finite(p, bodies)

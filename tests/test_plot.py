@@ -284,3 +284,22 @@ def test_values_beyond_an_axis_are_left_out_and_no_points_refused(run, tmp_path,
         frame_of(0.0, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
     with pytest.raises(ValueError, match="5 velocities"):
         frame_of(0.0, np.zeros((6, 3)), np.zeros((5, 3)), np.zeros((6, 3)), np.zeros((6, 3)), np.zeros(6))
+
+
+def test_a_position_that_is_not_finite_is_refused_in_one_line(run, tmp_path, run_cli):
+    """An edited particle file with a position of inf (a run's guards stop before writing one):
+    a cKDTree ValueError traceback, exit 1."""
+    import meshio
+
+    from femgrid_mpm.plotting.run_directory import frame_of
+
+    with pytest.raises(ValueError, match=r"point 1: a position that is not finite"):
+        frame_of(0.0, np.array([[0.0, 0.0], [np.inf, 0.0]]), np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 3)),
+                 np.zeros(2))
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    last = sorted((copy / "particles").glob("*.vtu"))[-1]
+    mesh = meshio.read(last)
+    mesh.points[0, 0] = np.inf
+    meshio.write(last, mesh)
+    check_refused(run_cli, copy, ["--out", str(tmp_path / "out")], "a position that is not finite")

@@ -350,7 +350,8 @@ class RunOutputs:
         names = [SCENE_FILE, SUMMARY_FILE]
         names += [SOURCE_SCENE_FILE] if self.source is not None else []
         names += [ENERGY_FILE] if self.energy is not None else []
-        names += [observer.collection for observer in self.observers]
+        # a series whose first record was never taken (a stop at step 0) has no collection
+        names += [observer.collection for observer in self.observers if (self.directory / observer.collection).exists()]
         names += [FINAL_FILE] if result.status != "running" else []
         # a checkpoint is written every N steps: a run shorter than N has none
         names += [CHECKPOINT_FILE] if self.checkpoint_every and (self.directory / CHECKPOINT_FILE).exists() else []

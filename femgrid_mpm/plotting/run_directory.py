@@ -57,11 +57,16 @@ def _vectors(prefix: str, values: np.ndarray) -> dict[str, np.ndarray]:
 
 def frame_of(time: float, x, v, x0, stress, body) -> Frame:
     """A :class:`Frame` from the arrays a run writes (z components dropped); ValueError (a damaged
-    file's, :class:`RunUnreadable` from its reader) for no points or arrays of other lengths."""
+    file's, :class:`RunUnreadable` from its reader) for no points, arrays of other lengths or a
+    position that is not finite."""
     x, v, x0, stress = (np.asarray(a, dtype=float)[:, :k] for a, k in ((x, 2), (v, 2), (x0, 2), (stress, 3)))
     if len(x) == 0 or any(len(a) != len(x) for a in (v, x0, stress, np.asarray(body))):
         raise ValueError(f"{len(x)} positions, {len(v)} velocities, {len(x0)} initial positions, {len(stress)} "
                          f"stresses, {len(np.asarray(body))} body numbers: not the points of a run")
+    if not (np.isfinite(x).all() and np.isfinite(x0).all()):  # a run's guards stop before writing one
+        bad = int(np.flatnonzero(~(np.isfinite(x).all(axis=1) & np.isfinite(x0).all(axis=1)))[0])
+        raise ValueError(f"point {bad}: a position that is not finite ({x[bad].tolist()}, from {x0[bad].tolist()}): "
+                         "not the points of a run")
     fields = {**_vectors("velocity", v), **_vectors("displacement", x - x0),
               "stress_xx": stress[:, 0], "stress_yy": stress[:, 1], "stress_xy": stress[:, 2],
               "body": np.asarray(body, dtype=float)}
