@@ -245,6 +245,7 @@ def test_a_directory_that_is_not_a_run_is_one_line(run, tmp_path, run_cli, name)
     (["--record", "-1"], "--record"),
     (["--record", "first"], "--record"),
     (["--format", "gif"], "--format: is the format of an animation"),
+    (["--fps", "5"], "--fps: is the frame rate of an animation: give it with --animate"),  # was taken and unused
     (["--out", "OUT/pictures.png"], "plot draws 2 pictures"),
     (["--only", "points", "--out", "OUT/points.gif"], "is a .png file"),
     (["--animate", "--format", "mp4"], "--format mp4: needs ffmpeg"),

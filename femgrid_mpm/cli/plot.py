@@ -16,6 +16,8 @@ from .parser import EXIT_DONE, EXIT_WRITE_FAILED, BadInput, emit, given_path, sa
 POINTS_PICTURE, ENERGY_PICTURE, ANIMATION = "points.png", "energy.png", "points"
 #: the animation formats and their matplotlib writers
 FORMATS = ("gif", "mp4")
+#: frames per second of an animation without --fps
+DEFAULT_FPS = 10
 PICTURE_SUFFIXES = (".png", *(f".{kind}" for kind in FORMATS))
 
 
@@ -57,7 +59,7 @@ def add_arguments(command) -> None:
                          help="instead, animate every record of the particle series (particles.pvd)")
     command.add_argument("--format", choices=FORMATS, help="of the animation (default: gif, or the suffix of --out; "
                          "mp4 needs ffmpeg)")
-    command.add_argument("--fps", type=frames_per_second, default=10, metavar="N",
+    command.add_argument("--fps", type=frames_per_second, default=None, metavar="N",
                          help="frames per second of the animation (default: 10)")
     command.add_argument("--out", metavar="FILE_OR_DIR",
                          help="a directory for the pictures (created if missing; default: DIR), or one file "
@@ -80,8 +82,10 @@ def _plot(args) -> int:
     run = RunDirectory.open(args.directory)
     if args.animate:
         return _animate(args, run, series_picture)
-    if args.format is not None:
-        raise BadInput("--format: is the format of an animation: give it with --animate")
+    for option, value in (("--format", args.format), ("--fps", args.fps)):
+        if value is not None:
+            raise BadInput(f"{option}: is {'the format' if option == '--format' else 'the frame rate'} of an animation: "
+                           "give it with --animate")
     wanted = [args.only] if args.only else ["points", "energy"]
     figures, notes = {}, []
     if "points" in wanted:
@@ -135,7 +139,8 @@ def _animate(args, run, series_picture) -> int:
         raise BadInput("--record: draws one record; --animate draws all of them")
     picture = series_picture(run, args.field)  # reads and checks every record first
     target = _targets(args.out, run.path, {"animation": f"{ANIMATION}.{kind}"}, (f".{kind}",), "--animate")["animation"]
-    writer = PillowWriter(fps=args.fps) if kind == "gif" else FFMpegWriter(fps=args.fps)
+    fps = DEFAULT_FPS if args.fps is None else args.fps
+    writer = PillowWriter(fps=fps) if kind == "gif" else FFMpegWriter(fps=fps)
     from ..plotting import write_animation
 
     if not _write(lambda: write_animation(picture, target, writer), target):
