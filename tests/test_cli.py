@@ -479,6 +479,9 @@ def test_energy_csv_rows_reach_the_file(tmp_path, flush_seconds):
         (["run", "{scene}", "--out", ""], "--out: is empty"),
         (["reproduce", "--out", ""], "--out: is empty"),
         (["reproduce", "--out", "{scene}/sub"], "cannot write there"),
+        # a --gallery that cannot be written: the --out it had made (o/a) was left behind
+        (["reproduce", "--case", "vibrating_bar", "--out", "{tmp}/o/a", "--gallery", "{scene}/sub"],
+         "--gallery {scene}/sub: cannot write there"),
         # an empty file or directory to read: it was taken as the working directory
         (["run", "", "--out", "{tmp}/o"], "argument SCENE.toml: is empty"),
         (["info", ""], "argument SCENE.toml: is empty"),
@@ -495,7 +498,7 @@ def test_bad_arguments_are_one_line_exit_2(tmp_path, capsys, argv, words):
     assert code == cli.EXIT_BAD_INPUT
     assert "Traceback" not in err
     (line,) = err.splitlines()
-    assert line.startswith("femgrid-mpm: error: ") and words in line
+    assert line.startswith("femgrid-mpm: error: ") and words.format(scene=scene) in line
     assert not (tmp_path / "o").exists()
 
 

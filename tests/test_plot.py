@@ -304,3 +304,15 @@ def test_a_position_that_is_not_finite_is_refused_in_one_line(run, tmp_path, run
     mesh.points[0, 0] = np.inf
     meshio.write(last, mesh)
     check_refused(run_cli, copy, ["--out", str(tmp_path / "out")], "a position that is not finite")
+
+
+def test_a_directory_where_a_picture_goes_is_refused_before_any_is_drawn(run, tmp_path, run_cli):
+    """points.png was written, then energy.png failed on the directory in its place: exit 1
+    (docs: exit 2, nothing written)."""
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    for picture in copy.glob("*.png"):
+        picture.unlink()
+    (copy / "energy.png").mkdir()
+    check_refused(run_cli, copy, [], "energy.png: is a directory, where a picture goes")
+    assert not (copy / "points.png").exists()

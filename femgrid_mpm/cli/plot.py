@@ -8,6 +8,7 @@ exit code 2, with nothing written.  Then each picture is written atomically.
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from .parser import EXIT_DONE, EXIT_WRITE_FAILED, BadInput, emit, given_path, say
@@ -167,9 +168,15 @@ def _targets(out_text: str | None, default: Path, names: dict[str, str], suffixe
         if out.exists() and not out.is_dir():
             raise BadInput(f"--out {out}: exists and is not a directory")
         out.mkdir(parents=True, exist_ok=True)
+        if not os.access(out, os.W_OK | os.X_OK):  # (a read-only mount too) before any picture is drawn
+            raise BadInput(f"--out {out}: cannot write there (read-only)")
     except OSError as error:
         raise BadInput(f"--out {out}: cannot be used: {error.strerror or error}") from None
-    return {kind: out / name for kind, name in names.items()}
+    targets = {kind: out / name for kind, name in names.items()}
+    for target in targets.values():  # a directory in a picture's place: refused before any is written
+        if target.is_dir() and not target.is_symlink():
+            raise BadInput(f"{target}: is a directory, where a picture goes")
+    return targets
 
 
 def _write(write, target: Path) -> bool:

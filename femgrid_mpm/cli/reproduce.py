@@ -25,17 +25,23 @@ def reproduce(args) -> int:
     if unknown:
         raise BadInput(f"--case {unknown[0]}: no such case (cases: {', '.join(CASES)})")
     out = output_directory(args.out)
+    gallery = output_directory(args.gallery, "--gallery") if args.gallery is not None else None
+    made = [place for place in (out, *out.parents) if not place.exists()]  # to take back if --gallery fails
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe_writable(out)
     except OSError as error:
         raise BadInput(f"--out {out}: cannot write there: {error.strerror or error}") from None
-    gallery = output_directory(args.gallery, "--gallery") if args.gallery is not None else None
     if gallery is not None:
         try:
             gallery.mkdir(parents=True, exist_ok=True)
             probe_writable(gallery)
         except OSError as error:
+            for place in made:  # deepest first: exit 2 leaves nothing behind
+                try:
+                    place.rmdir()
+                except OSError:
+                    break
             raise BadInput(f"--gallery {gallery}: cannot write there: {error.strerror or error}") from None
     warnings.simplefilter("ignore")  # expected events (negative masses under "warn") are in the tables
     chosen = [name for name in CASES if not args.case or name in args.case]
