@@ -528,11 +528,28 @@ def test_reproduce_runs_every_case_and_prints_its_table(tmp_path, capsys, monkey
     code, stdout, err = run_cli(["reproduce", "--out", tmp_path / "results"], capsys)
     assert code == 0
     assert calls == [tmp_path / "results" / "first", tmp_path / "results" / "second"]
-    assert stdout == "| first |\n\n| second |\n\n"
+    assert stdout == f"| first |\n\n| second |\n\nreproduced first, second: figures and tables in {tmp_path / 'results'}\n"
     assert err == "first ...\nsecond ...\n"
     calls.clear()
     assert run_cli(["reproduce", "--out", tmp_path / "again", "--case", "second"], capsys)[0] == 0
     assert calls == [tmp_path / "again" / "second"]
+    # a file where a case writes its directory: refused before any case runs (was a FileExistsError traceback)
+    calls.clear()
+    (tmp_path / "third").mkdir()
+    (tmp_path / "third" / "second").write_text("a file")
+    code, _, err = run_cli(["reproduce", "--out", tmp_path / "third"], capsys)
+    assert code == cli.EXIT_BAD_INPUT and calls == []
+    assert err == f"femgrid-mpm: error: --out {tmp_path / 'third'}: {tmp_path / 'third' / 'second'} is a file, where case second writes its directory\n"
+
+    def full_disk(out_dir):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setitem(reproduce.CASES, "second", full_disk)
+    code, _, err = run_cli(["reproduce", "--out", tmp_path / "fourth"], capsys)
+    assert code == cli.EXIT_WRITE_FAILED
+    assert err.splitlines()[-1] == (f"femgrid-mpm: error: cannot write the outputs of case second in "
+                                    f"{tmp_path / 'fourth' / 'second'}: No space left on device; the finished cases "
+                                    f"(first) are in {tmp_path / 'fourth'}")
 
 
 def test_version_prints_the_installed_distributions_version(capsys):

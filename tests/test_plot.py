@@ -294,6 +294,8 @@ def test_a_position_that_is_not_finite_is_refused_in_one_line(run, tmp_path, run
 
     from femgrid_mpm.plotting.run_directory import frame_of
 
+    with pytest.raises(ValueError, match=r"positions of shape \(2, 1\): not the points of a run"):
+        frame_of(0.0, np.zeros((2, 1)), np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 3)), np.zeros(2))
     with pytest.raises(ValueError, match=r"point 1: a position that is not finite"):
         frame_of(0.0, np.array([[0.0, 0.0], [np.inf, 0.0]]), np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 3)),
                  np.zeros(2))

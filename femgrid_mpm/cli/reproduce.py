@@ -45,6 +45,9 @@ def reproduce(args) -> int:
             raise BadInput(f"--gallery {gallery}: cannot write there: {error.strerror or error}") from None
     warnings.simplefilter("ignore")  # expected events (negative masses under "warn") are in the tables
     chosen = [name for name in CASES if not args.case or name in args.case]
+    for name in chosen:  # before any case runs: each writes into its own directory
+        if (out / name).exists() and not (out / name).is_dir():
+            raise BadInput(f"--out {out}: {out / name} is a file, where case {name} writes its directory")
     bar, follow = runs_bar(sum(PLANNED_RUNS[name]() for name in chosen), sys.stderr.isatty())
     finished: list[str] = []
     try:
@@ -61,6 +64,11 @@ def reproduce(args) -> int:
         if bar is not None:
             bar.close()
         return interrupted(interrupt, out, chosen[len(finished)], finished)
+    except OSError as error:  # a full disk while a case writes its figures or tables
+        done = f"; the finished cases ({', '.join(finished)}) are in {out}" if finished else ""
+        say("error", f"cannot write the outputs of case {chosen[len(finished)]} in {out / chosen[len(finished)]}: "
+                     f"{error.strerror or error}{done}")
+        return EXIT_WRITE_FAILED
     finally:
         if bar is not None:
             bar.close()
@@ -72,6 +80,7 @@ def reproduce(args) -> int:
         except OSError as error:  # after the run: its results are written, the copy is not
             say("error", f"--gallery {gallery}: cannot write there: {error.strerror or error}")
             return EXIT_WRITE_FAILED
+    emit(f"reproduced {', '.join(chosen)}: figures and tables in {out}")
     return EXIT_DONE
 
 

@@ -59,7 +59,12 @@ def frame_of(time: float, x, v, x0, stress, body) -> Frame:
     """A :class:`Frame` from the arrays a run writes (z components dropped); ValueError (a damaged
     file's, :class:`RunUnreadable` from its reader) for no points, arrays of other lengths or a
     position that is not finite."""
-    x, v, x0, stress = (np.asarray(a, dtype=float)[:, :k] for a, k in ((x, 2), (v, 2), (x0, 2), (stress, 3)))
+    arrays = [(name, np.asarray(a, dtype=float), k) for name, a, k in
+              (("positions", x, 2), ("velocities", v, 2), ("initial positions", x0, 2), ("stresses", stress, 3))]
+    for name, array, k in arrays:
+        if array.ndim != 2 or array.shape[1] < k:
+            raise ValueError(f"{name} of shape {array.shape}: not the points of a run ({k} components each)")
+    x, v, x0, stress = (array[:, :k] for _, array, k in arrays)
     if len(x) == 0 or any(len(a) != len(x) for a in (v, x0, stress, np.asarray(body))):
         raise ValueError(f"{len(x)} positions, {len(v)} velocities, {len(x0)} initial positions, {len(stress)} "
                          f"stresses, {len(np.asarray(body))} body numbers: not the points of a run")
