@@ -567,10 +567,11 @@ def test_reproduce_lists_its_cases_and_names_them_for_an_unknown_case(tmp_path, 
     assert (code, err) == (0, "")
     assert stdout.splitlines() == list(CASES)
     assert not (tmp_path / "results").exists()  # nothing run, nothing written
-    code, _, err = run_cli(["reproduce", "--case", "bar", "--out", tmp_path / "results"], capsys)
-    assert code == cli.EXIT_BAD_INPUT
-    (line,) = err.splitlines()
-    assert line == f"femgrid-mpm: error: --case bar: no such case (cases: {', '.join(CASES)})"
+    for argv in (["--case", "bar"], ["--list", "--case", "bar"]):  # with --list it was passed over
+        code, stdout, err = run_cli(["reproduce", *argv, "--out", tmp_path / "results"], capsys)
+        assert code == cli.EXIT_BAD_INPUT and stdout == ""
+        (line,) = err.splitlines()
+        assert line == f"femgrid-mpm: error: --case bar: no such case (cases: {', '.join(CASES)})"
 
 
 def test_reproduce_gallery_copies_the_figures_of_the_cases_run(tmp_path, capsys, monkeypatch):

@@ -98,7 +98,7 @@ def _plot(args) -> int:
             notes.append(f"no points drawn: {run.path} has no records of them yet")
     if "energy" in wanted:
         table = energy_table(run.energy) if run.energy is not None else None
-        problem = ("no energy.csv (the scene's [output] energy = false)" if table is None
+        problem = ("no energy.csv (the scene's [output] energy = false, or the file was removed)" if table is None
                    else "energy.csv has no records yet" if len(table["time"]) == 0 else None)
         if problem is None:
             figures["energy"] = energy_figure(run, table)

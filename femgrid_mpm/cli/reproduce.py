@@ -17,13 +17,13 @@ def reproduce(args) -> int:
     from ..reproduce import CASES, PLANNED_RUNS
     from ..reproduce.timing import following
 
+    unknown = [name for name in args.case if name not in CASES]
+    if unknown:  # (with --list too: a misspelt case is not passed over)
+        raise BadInput(f"--case {unknown[0]}: no such case (cases: {', '.join(CASES)})")
     if args.list:
         for name in CASES:
             emit(name)
         return EXIT_DONE
-    unknown = [name for name in args.case if name not in CASES]
-    if unknown:
-        raise BadInput(f"--case {unknown[0]}: no such case (cases: {', '.join(CASES)})")
     out = output_directory(args.out)
     gallery = output_directory(args.gallery, "--gallery") if args.gallery is not None else None
     made = [place for place in (out, *out.parents) if not place.exists()]  # to take back if --gallery fails
