@@ -72,8 +72,18 @@ def helpers_scene_text() -> str:
     return (files("femgrid_mpm") / "scenes" / "vibrating_bar.toml").read_text()
 
 
-def test_the_runs_bar_counts_runs_on_a_terminal_only(capsys):
-    assert runs_bar(3, enabled=False) == (None, None)
+def test_the_runs_bar_counts_runs_on_a_terminal_and_in_lines_elsewhere(capsys, monkeypatch):
+    import femgrid_mpm.cli.progress as progress
+
+    monkeypatch.setattr(progress, "LINE_EVERY", 0.0)  # (60 s in a run: a line a minute at most)
+    bar, line = runs_bar(3, enabled=False)
+    assert bar is None
+    line("first")
+    assert capsys.readouterr().err == "  1 of 3 runs, 0 min (first)\n"
+    monkeypatch.setattr(progress, "LINE_EVERY", 3600.0)
+    bar, line = runs_bar(3, enabled=False)
+    line("first")
+    assert capsys.readouterr().err == ""
     bar, count = runs_bar(3, enabled=True)
     count("first")
     count("second")
