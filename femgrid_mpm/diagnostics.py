@@ -66,9 +66,7 @@ def first_not_finite(particles, bodies) -> str:
     found = np.flatnonzero(bad)
     if found.size:
         return f"; first at {describe_point(p, bodies, int(found[0]))}"
-    for name in (*p.__dataclass_fields__, "volume"):  # the volume: mass over a density that may be 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            values = np.asarray(getattr(p, name))
+    for name, values in {**p.arrays(), "volume": p.volume}.items():  # the volume: mass over a density that may be 0
         if values.dtype.kind == "f" and values.ndim and len(values) == p.n:
             found = np.flatnonzero(~np.isfinite(values.reshape(p.n, -1)).all(axis=1))
             if found.size:

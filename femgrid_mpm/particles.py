@@ -69,12 +69,16 @@ class Particles:
         bounds = [0, *edges.tolist(), self.n]
         return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
 
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Every array of the points by its field's name (the arrays themselves, not copies)."""
+        return {name: vars(self)[name] for name in self.__dataclass_fields__}
+
     @classmethod
     def concatenate(cls, parts: list["Particles"]) -> "Particles":
-        return cls(**{name: np.concatenate([getattr(p, name) for p in parts]) for name in cls.__dataclass_fields__})
+        return cls(**{name: np.concatenate([p.arrays()[name] for p in parts]) for name in cls.__dataclass_fields__})
 
     def copy(self) -> "Particles":
-        return Particles(**{name: getattr(self, name).copy() for name in self.__dataclass_fields__})
+        return Particles(**{name: array.copy() for name, array in self.arrays().items()})
 
 
 def seed_rectangle(lower, upper, spacing: float, points_per_cell: int) -> tuple[np.ndarray, np.ndarray]:

@@ -26,7 +26,7 @@ def simulation_state(simulation, now: float) -> tuple[dict, dict]:
     from these at every step.
     """
     p = simulation.particles
-    arrays = {f"particles.{name}": getattr(p, name) for name in p.__dataclass_fields__}
+    arrays = {f"particles.{name}": array for name, array in p.arrays().items()}
     values = {
         "step": simulation.step_index,
         "time": simulation.time,
@@ -75,10 +75,10 @@ def _check(simulation, arrays: dict, values: dict) -> None:
     if simulation.outcome is not None:  # its result holds the arrays a restore would overwrite
         raise ValueError(f"this simulation's run has {simulation.outcome}: restore into a new Simulation of the scene")
     p = simulation.particles
-    for name in p.__dataclass_fields__:
+    for name, current in p.arrays().items():
         if f"particles.{name}" not in arrays:
             raise ValueError(f"particles.{name}: missing")
-        array, current = np.asarray(arrays[f"particles.{name}"]), getattr(p, name)
+        array = np.asarray(arrays[f"particles.{name}"])
         if array.shape != current.shape or array.dtype != current.dtype:
             raise ValueError(f"particles.{name}: shape {array.shape} {array.dtype}, this scene has {current.shape} {current.dtype}")
     missing = [key for key in ("step", "time", "dt", "wall_time", "work", "energy_guard", "negative_mass")
@@ -116,8 +116,8 @@ def _take_back(simulation, arrays: dict, values: dict) -> None:
     p = simulation.particles
     for index, recorder in enumerate(simulation.recorders):
         recorder.restore(np.asarray(arrays[f"records.{index}"]))  # checks the shape first
-    for name in p.__dataclass_fields__:
-        np.copyto(getattr(p, name), np.asarray(arrays[f"particles.{name}"]))  # in place: effects and engines hold them
+    for name, current in p.arrays().items():
+        np.copyto(current, np.asarray(arrays[f"particles.{name}"]))  # in place: effects and engines hold them
     simulation.step_index, simulation.time = int(values["step"]), float(values["time"])
     simulation.wall_time = float(values["wall_time"])
     work = [(str(name), float(value)) for name, value in values["work"]]

@@ -210,7 +210,8 @@ def test_a_registry_entry_the_scene_cannot_use_is_named_when_the_scene_loads(sli
 
 def test_observers_that_are_not_effects_are_refused_before_the_run():
     """observers=[object()] or a string: AttributeError 'stage' from inside the simulation; an
-    observer whose bind returned None: TypeError at the first record."""
+    observer whose bind returned None: TypeError at the first record; an effect class without a
+    Stage fails when it is made."""
     from femgrid_mpm.effects import Stage
     from femgrid_mpm.effects.base import Effect
     from femgrid_mpm.scene import bundled_scene
@@ -222,6 +223,10 @@ def test_observers_that_are_not_effects_are_refused_before_the_run():
         def bind(self, simulation):
             return None
 
+    for stage, message in ((None, "effect NoStage: no stage"), ("observe", "effect NoStage: stage 'observe' is not a Stage")):
+        with pytest.raises(TypeError, match=message):  # when the class is made, not at the first step
+            type("NoStage", (Effect,), {"name": "none", "bind": lambda self, simulation: None,
+                                        **({} if stage is None else {"stage": stage})})
     scene = bundled_scene("vibrating_bar").with_overrides(**{"time.end": 0.3})
     for observers, message in ((object(), "observers: a list of Effect objects, got object"),
                                ("ab", "observers: a list of Effect objects, got str"),

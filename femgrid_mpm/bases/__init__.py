@@ -25,10 +25,9 @@ BASES = {builder.name: builder for builder in (Q1, Q2, SERENDIPITY, BSPLINE3, BS
 def check_registry() -> None:
     """Raise TypeError naming the first entry of :data:`BASES` that lacks part of
     :class:`BasisDefinition` (the scene reads every attribute), or whose ``name`` is not its key."""
-    members = [name for name in BasisDefinition.__annotations__] + ["build"]
     for key, basis in BASES.items():
-        missing = [name for name in members if not hasattr(basis, name)]
-        if missing:
+        if not isinstance(basis, BasisDefinition):  # the Protocol is runtime-checkable: every member
+            missing = sorted({*BasisDefinition.__annotations__, "build"} - set(dir(basis)))
             raise TypeError(f"bases.BASES[{key!r}]: a {type(basis).__name__} without {', '.join(missing)} "
                             "(femgrid_mpm.bases.BasisDefinition)")
         if basis.name != key:

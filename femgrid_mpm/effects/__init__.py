@@ -70,18 +70,15 @@ REGISTRY = (
 
 def check_registry(scene_tables: tuple[str, ...]) -> None:
     """Raise TypeError or ValueError naming the first entry of :data:`REGISTRY` that the scene
-    could not declare: not an :class:`~femgrid_mpm.effects.base.Effect` with a
-    :class:`Stage`, listed twice, in a table the scene does not have (``scene_tables``), or
+    could not declare: not an :class:`~femgrid_mpm.effects.base.Effect`, listed twice, in a table the scene does not have (``scene_tables``), or
     without a ``kind`` of its own in a table of several."""
     from .base import Effect
 
     seen: set = set()
     for entry in REGISTRY:
         effect = entry.effect
-        if not (isinstance(effect, type) and issubclass(effect, Effect)):
+        if not (isinstance(effect, type) and issubclass(effect, Effect)):  # (its stage: Effect checks it)
             raise TypeError(f"effects.REGISTRY: {effect!r} is not an Effect class (femgrid_mpm.effects.base.Effect)")
-        if not isinstance(getattr(effect, "stage", None), Stage):
-            raise TypeError(f"effects.REGISTRY: {effect.__name__}.stage is not a Stage")
         if effect in seen:
             raise ValueError(f"effects.REGISTRY: {effect.__name__} is listed twice")
         seen.add(effect)

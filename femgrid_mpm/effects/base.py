@@ -42,6 +42,17 @@ class Effect(abc.ABC):
     name: ClassVar[str]
     stage: ClassVar[Stage]
 
+    def __init_subclass__(cls, **kwargs):
+        # the step files every effect by its stage: one without (or with a string) would fail at
+        # the first step, inside the simulation
+        super().__init_subclass__(**kwargs)
+        try:
+            stage = cls.stage
+        except AttributeError:
+            raise TypeError(f"effect {cls.__name__}: no stage (a femgrid_mpm.effects.Stage)") from None
+        if not isinstance(stage, Stage):
+            raise TypeError(f"effect {cls.__name__}: stage {stage!r} is not a Stage")
+
     @abc.abstractmethod
     def bind(self, simulation) -> Action:
         """The action the step calls at :attr:`stage`, set up for ``simulation``."""
@@ -108,8 +119,8 @@ class ForceNotFinite(ArithmeticError):
 
 
 def checked_observers(observers) -> list:
-    """``Simulation(observers=...)`` as a list of :class:`Effect` s; TypeError naming the first
-    entry that is not one (or a stage that is not a :class:`Stage`), before anything is bound."""
+    """``Simulation(observers=...)`` as a list of :class:`Effect` s (each with its :class:`Stage`,
+    checked when its class is made); TypeError naming the first entry that is not one."""
     if observers is None:
         return []
     if isinstance(observers, (str, bytes, Effect)) or not isinstance(observers, Iterable):
@@ -119,8 +130,6 @@ def checked_observers(observers) -> list:
         if not isinstance(observer, Effect):
             raise TypeError(f"observers[{index}]: a {type(observer).__name__}, not an Effect "
                             "(femgrid_mpm.effects.Effect: a name, a stage and bind)")
-        if not isinstance(observer.stage, Stage):
-            raise TypeError(f"observers[{index}] ({observer.name!r}): stage {observer.stage!r} is not a Stage")
     return listed
 
 
