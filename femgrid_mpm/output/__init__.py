@@ -55,7 +55,6 @@ True
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
 
 from ..step import Stage
@@ -82,6 +81,7 @@ from .files import (
 )
 from .grid_series import GridSeries
 from .particle_series import ParticleSeries, collection_text
+from .series import is_frame_file
 from .results import json_safe, write_final_state, write_summary
 from .toml_writer import scene_to_toml
 
@@ -287,7 +287,7 @@ class RunOutputs:
                                  for observer, entries in series.items()}
         for observer, entries in outputs._series_state.items():
             for time, name in entries:  # the names go into the .pvd's XML and name the files it reads
-                if not (math.isfinite(time) and re.fullmatch(rf"{re.escape(observer)}/{re.escape(observer)}_\d+\.vtu", name)):
+                if not (math.isfinite(time) and is_frame_file(observer, name)):
                     raise ValueError(f"series {observer!r}: entry ({time!r}, {name[:80]!r}) is not one it writes")
         return outputs
 

@@ -11,6 +11,7 @@ whenever the run stops.
 from __future__ import annotations
 
 import abc
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -35,6 +36,17 @@ def collection_text(entries: list[tuple[float, str]]) -> str:
         '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n'
         "  <Collection>\n" + datasets + "  </Collection>\n</VTKFile>\n"
     )
+
+
+def frame_file(series: str, step: int, digits: int) -> str:
+    """The file of one record of a series, relative to the run's directory: ``NAME/NAME_STEP.vtu``."""
+    return f"{series}/{series}_{step:0{digits}d}.vtu"
+
+
+def is_frame_file(series: str, name: str) -> bool:
+    """Whether ``name`` is a file :func:`frame_file` makes for ``series`` (a checkpoint's entry
+    goes into the .pvd's XML and names a file it reads)."""
+    return re.fullmatch(rf"{re.escape(series)}/{re.escape(series)}_\d+\.vtu", name) is not None
 
 
 @dataclass
@@ -84,7 +96,7 @@ class MeshSeries(Effect):
 
         def write_frame(ctx: StepContext) -> None:
             (directory / self.name).mkdir(parents=True, exist_ok=True)
-            name = f"{self.name}/{self.name}_{ctx.step:0{digits}d}.vtu"
+            name = frame_file(self.name, ctx.step, digits)
             with atomic_path(directory / name) as temporary:
                 meshio.write(temporary, mesh_of(ctx), file_format="vtu")
             self.entries.append((ctx.time, name))
