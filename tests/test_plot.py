@@ -83,6 +83,20 @@ def test_default_writes_into_the_run_directory_and_each_field_draws(run, tmp_pat
             assert_not_blank(image)
 
 
+def test_body_colours_are_one_band_a_body():
+    """Two bodies: two colours (tab10's first two), each band centred on its body's number."""
+    from matplotlib import colormaps
+
+    from femgrid_mpm.plotting.figures import _scale
+
+    colours, low, high = _scale("body", np.array([0.0, 1.0, 1.0, 0.0]))
+    assert colours.N == 2 and (low, high) == (-0.5, 1.5)
+    for body in (0, 1):
+        assert colours((body - low) / (high - low)) == colormaps["tab10"](body)
+    eleven = _scale("body", np.arange(11.0))[0]
+    assert eleven.N == 11 and eleven(1.0) == colormaps["tab10"](0)  # the eleventh takes the first's colour again
+
+
 def test_animation_has_one_frame_per_record(run, tmp_path, run_cli):
     target = tmp_path / "movie.gif"
     code, stdout, err = run_cli(["plot", run, "--animate", "--field", "velocity_x", "--out", target])

@@ -42,12 +42,18 @@ def _label(field: str) -> str:
     return f"{field} ({FIELDS[field]})"
 
 
-def _scale(field: str, values: np.ndarray) -> tuple[str, float, float]:
+def _scale(field: str, values: np.ndarray):
     """Colour map and range: diverging and centred on zero for a stress that changes sign,
-    tab10 for bodies, viridis otherwise; a constant field gets a range around its value."""
+    one of tab10's colours a body (the colour bar a band each), viridis otherwise; a
+    constant field gets a range around its value."""
     low, high = (float(np.min(values)), float(np.max(values))) if len(values) else (0.0, 1.0)
     if field == "body":
-        return "tab10", -0.5, max(high, 0.0) + 0.5
+        from matplotlib import colormaps
+        from matplotlib.colors import ListedColormap
+
+        # tab10 itself spread over the bodies' range drew ten bands for two bodies
+        bodies = int(max(high, 0.0)) + 1
+        return ListedColormap([colormaps["tab10"](body % 10) for body in range(bodies)]), -0.5, bodies - 0.5
     if field.startswith("stress") and low < 0 < high:
         bound = max(-low, high)
         return "RdBu_r", -bound, bound
