@@ -24,9 +24,8 @@ from typing import Callable
 
 import numpy as np
 
-from .diagnostics import (EnergyGuard, NegativeMassMonitor, SimulationStopped, fastest_point, first_not_finite,
-                          at_rest, runaway_causes,
-                          points_kinetic_energy, warn_of_a_long_step, warn_of_energy_drift)
+from .diagnostics import (EnergyGuard, NegativeMassMonitor, SimulationStopped, at_rest, fastest_point, first_not_finite,
+                          points_kinetic_energy, runaway_causes, warn_of_a_long_step, warn_of_energy_drift)
 from .observers import EnergyBookkeeping, kinetic_energy
 from .effects.base import ForceNotFinite, Recorder, bound, checked_observers
 from .engines import engine_for
@@ -75,13 +74,13 @@ class Simulation:
         mirrors = [mirror for mirror in (effect.mirror(self.grid) for effect in acting) if mirror is not None]
         self.constraint = NodeConstraint.combine(self.grid.n_nodes, self.fixed, mirrors) if mirrors else None
         self.scheme = SCHEMES[scene.solver.scheme]
-        self.dt = self._time_step()
+        warn_of_thin_bodies(scene.bodies, spec.spacing, self.grid.definition.support_width, spec.basis)  # before
+        self.dt = self._time_step()  # a step that a body of one point leaves unbounded is refused
         self.mass: MassModel = self.mass_model(time_step=self.dt)
         self.negative_mass = NegativeMassMonitor(scene.solver.negative_mass, applies=self.mass.divides_by_row_sums)
         # within time.max_steps and output.max_bytes; at least one step: a step far longer
         # than the run would otherwise round to none
         self.n_steps = max(1, run_steps(scene, self.dt))
-        warn_of_thin_bodies(scene.bodies, spec.spacing, self.grid.definition.support_width, spec.basis)
         warn_of_a_long_step(self.dt, scene.time, self.end_time)
         watching = [*([self.energy] if self.energy else []), *checked_observers(observers)]
         self.effects: dict[Stage, list[tuple[str, Callable]]] = {stage: [] for stage in Stage}
@@ -135,8 +134,8 @@ class Simulation:
             )
         if self.critical_dt == math.inf:  # no stiffness on a free degree of freedom: nothing limits the step
             raise ValueError(
-                "time.dt: dt = 'auto' has nothing to limit the step (an infinite critical step: every node fixed, "
-                "or a stiffness that vanishes in floating point, e.g. a spacing or a body size far from metres); "
+                "time.dt: dt = 'auto' has nothing to limit the step (an infinite critical step: every node fixed, a body "
+                "of one point, or a stiffness that vanishes in floating point, e.g. a spacing or a body size far from metres); "
                 "give dt in seconds")
         return time.safety * self.critical_dt
 
@@ -177,7 +176,7 @@ class Simulation:
         try:  # P2G: N at the points, the grid mass, N.T @ (m_p (v_p - v_ref))
             relative_momentum = self.transfer.to_grid(ctx, self.mass)
         except ValueError as error:
-            raise self._stop(f"a particle left the grid: {error}", "particle_left_grid") from None
+            raise self._left_grid(error) from None
         for lumped, smallest, scale in self.mass.row_sums():  # one per field
             self.negative_mass.check(lumped, scale, ctx.step, ctx.time, self.grid.nodes, smallest)
         self.negative_mass.record_below_threshold(self.mass.nodes_below_threshold, ctx.step)
@@ -297,6 +296,9 @@ class Simulation:
             for name, grid_force in ctx.external.items():
                 ctx.work[name] = ctx.work.get(name, 0.0) + dt * float(np.sum(grid_force * mid_velocity))
 
+    def _left_grid(self, error: ValueError) -> SimulationStopped:
+        return self._stop(f"a particle left the grid: {error}", "particle_left_grid")
+
     def _stop(self, message: str, reason: str) -> SimulationStopped:
         return SimulationStopped(f"step {self.step_index} (t = {self.time:.6g} s): {message}", self.step_index, self.time, reason)
 
@@ -315,26 +317,22 @@ class Simulation:
         progress : callable, optional
             Called with ``(step, time)`` after every step.
         checkpoint : callable, optional
-            Called with the simulation between steps, every
-            ``checkpoint_every`` steps, when the run goes on (not after its
-            last step): the state is then complete (see :meth:`state`), and
-            a run continued from it (:meth:`restore`, then :meth:`run`)
-            repeats this one bit for bit.
+            Called with the simulation between steps, every ``checkpoint_every`` steps, when the
+            run goes on (not after its last step): the state is then complete (:meth:`state`), and
+            a run continued from it (:meth:`restore`, :meth:`run`) repeats this one bit for bit.
 
-        The guards (the energy guard, the finiteness check) see every step's
-        state and the final one; a completed run warns once
-        (:class:`~femgrid_mpm.diagnostics.EnergyDriftWarning`) when its
-        ``energy_drift`` (:func:`femgrid_mpm.observers.energy_drift`) exceeds
+        The guards (the energy guard, the finiteness check) see every step's state and the final
+        one; a completed run warns once (:class:`~femgrid_mpm.diagnostics.EnergyDriftWarning`) when
+        its ``energy_drift`` (:func:`femgrid_mpm.observers.energy_drift`) exceeds
         :data:`~femgrid_mpm.diagnostics.ENERGY_DRIFT_LIMIT`.
 
         Raises
         ------
         SimulationStopped
-            When a guard stops the run; its ``result`` holds the records and
-            the state up to that step.
+            When a guard stops the run (a point off the grid after the last step too); its
+            ``result`` holds the records and the state up to that step.
         ValueError
-            If this simulation has run already (completed or stopped), or runs
-            (a call from another thread): it runs once, to ``time.end``.
+            If this simulation has run already, or runs (another thread's call): it runs once.
         """
         if self.outcome is not None:
             raise ValueError(
@@ -360,6 +358,11 @@ class Simulation:
             if self.every or self.recorders:  # the last record: the state at the end
                 self.project()
                 self._run(Stage.OBSERVE)
+            else:  # a point the last step took off the grid stops the run, as one a step earlier does
+                try:
+                    self.grid.locate(self.particles.x)
+                except ValueError as error:
+                    raise self._left_grid(error) from None
             # the guards see the state the run ends with, as they saw every step's start
             self._guard_energy(recorded=bool(self.every))
         except SimulationStopped as stop:

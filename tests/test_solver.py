@@ -332,6 +332,21 @@ def test_particle_leaving_the_grid_stops_the_run_with_its_name():
     assert result.status == "stopped" and len(result.energy["time"]) >= 1  # records so far are kept
 
 
+@pytest.mark.parametrize("every", [None, 1])
+@pytest.mark.parametrize("end", [0.24, 0.25])
+def test_a_particle_the_last_step_takes_off_the_grid_stops_the_run_as_at_any_step(every, end):
+    """The block's last column of six points (x = 1.75 - 1/12) moves rigidly at 10 m/s and passes
+    the grid's edge x = 4 at t = 0.2333 s: after step 24 (t = 0.24 s).  A run ending there
+    stops there, as the run that goes on does, with records or without (the last record's
+    P2G found it; without records the run reported success with a point off the grid)."""
+    scene = block_scene(velocity=(10.0, 0.0), end=end, every=every)
+    with pytest.raises(SimulationStopped, match=r"^step 24 \(t = 0\.24 s\): a particle left the grid: 6 of 36 points "
+                                                 r"lie outside the grid \[0, 4\] x \[0, 3\]") as stop:
+        Simulation(scene).run()
+    assert stop.value.reason == "particle_left_grid" and stop.value.result.status == "stopped"
+    assert abs(stop.value.result.particles.x[:, 0].max() - (1.75 - 1 / 12 + 2.4)) < 1e-12
+
+
 def rank_deficient_scene(fallback):
     """Cubic B-splines, 2 points per cell across a body 2 cells thick: 4 points
     for the 5 functions that span its depth, so N.T diag(m) N is singular."""
