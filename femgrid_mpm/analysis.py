@@ -34,12 +34,19 @@ def modal_velocity_probe(length: float) -> Probe:
     return Probe(project, name="modal_velocity")
 
 
+def _plane(plane: str) -> str:
+    """``plane``, checked: any other word than "stress" was taken for plane strain, without an error."""
+    if plane not in ("strain", "stress"):
+        raise ValueError(f"plane must be 'strain' or 'stress' (a scene's material.plane), got {plane!r}")
+    return plane
+
+
 def bar_axial_period_1d(length: float, E: float, nu: float, density: float, plane: str) -> float:
     """Free-free rod, first axial mode: ``2 L / c`` with ``c^2 = E' / rho``.
 
     ``E' = E`` in plane stress and ``E / (1 - nu^2)`` in plane strain.
     """
-    modulus = E if plane == "stress" else E / (1 - nu**2)
+    modulus = E if _plane(plane) == "stress" else E / (1 - nu**2)
     return float(2 * length / np.sqrt(modulus / density))
 
 
@@ -63,7 +70,7 @@ def bar_axial_period_2d(
     mesh = skfem.MeshQuad.init_tensor(np.linspace(0, length, elements_along + 1), np.linspace(0, height, across + 1))
     basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementQuad2()))
     lam, mu = lame_parameters(E, nu)
-    if plane == "stress":
+    if _plane(plane) == "stress":
         lam = 2 * lam * mu / (lam + 2 * mu)
 
     @skfem.BilinearForm

@@ -16,7 +16,8 @@ class Probe(Effect):
     """An observer that records ``function(ctx)`` at every record step.
 
     Pass it to :class:`femgrid_mpm.solver.Simulation` as one of its
-    ``observers``; ``times`` and ``values`` fill as the run goes.
+    ``observers``; ``times`` and ``values`` fill as the run goes, and start
+    afresh when it is bound to another simulation.
     """
 
     function: Callable[[StepContext], float]
@@ -27,6 +28,11 @@ class Probe(Effect):
     stage = Stage.OBSERVE
 
     def bind(self, simulation):
+        # one probe reused for a second run would otherwise append that run's records to the
+        # first's, and a period measured on them is wrong without an error; new lists leave
+        # the first run's arrays, if the caller kept them, as they were
+        self.times, self.values = [], []
+
         def record(ctx: StepContext) -> None:
             self.times.append(ctx.time)
             self.values.append(self.function(ctx))
