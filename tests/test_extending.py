@@ -172,6 +172,20 @@ print(json.dumps({"same": bool(np.array_equal(runs["scipy"].particles.x, runs["m
     assert json.loads(done.stdout.splitlines()[-1]) == {"same": True}
 
 
+#: a load of its own, with only the members given (an AttributeError at the simulation's set-up
+#: without a name, a TypeError from inside the scene's validation without a bind)
+LIFT = """from typing import Literal
+from pydantic.dataclasses import dataclass
+from femgrid_mpm import effects
+from femgrid_mpm.effects import Stage
+from femgrid_mpm.effects.base import Effect
+@dataclass(frozen=True)
+class Lift(Effect):
+    kind: Literal['lift']
+    {members}
+effects.REGISTRY = effects.REGISTRY + (effects.Entry(Lift, 'loads', kind='lift'),)
+"""
+
 REGISTRY_SLIPS = {
     "a basis without sized": (
         "from femgrid_mpm.bases import BASES, Q1\n"
@@ -193,6 +207,13 @@ REGISTRY_SLIPS = {
         "effects.REGISTRY = effects.REGISTRY + (effects.Entry(Lift, 'lods', kind='lift'),)\n",
         "ValueError: effects.REGISTRY: Lift: the scene has no table 'lods' (its tables: loads, damping, contact, "
         "supports, reference)"),
+    "an effect without a name": (
+        LIFT.format(members="stage = Stage.EXTERNAL_FORCE\n"
+                            "    def bind(self, simulation): return lambda ctx: None"),
+        "TypeError: effects.REGISTRY: Lift has no name (a str: its key in the work ledger)"),
+    "an effect without bind": (
+        LIFT.format(members="name = 'lift'; stage = Stage.EXTERNAL_FORCE"),
+        "TypeError: effects.REGISTRY: Lift has no bind"),
 }
 
 
@@ -227,8 +248,15 @@ def test_observers_that_are_not_effects_are_refused_before_the_run():
         with pytest.raises(TypeError, match=message):  # when the class is made, not at the first step
             type("NoStage", (Effect,), {"name": "none", "bind": lambda self, simulation: None,
                                         **({} if stage is None else {"stage": stage})})
+    class Nameless(Effect):
+        stage = Stage.OBSERVE
+
+        def bind(self, simulation):
+            return lambda ctx: None
+
     scene = bundled_scene("vibrating_bar").with_overrides(**{"time.end": 0.3})
     for observers, message in ((object(), "observers: a list of Effect objects, got object"),
+                               ([Nameless()], r"observers\[0\]: a Nameless without a name"),
                                ("ab", "observers: a list of Effect objects, got str"),
                                ([object()], r"observers\[0\]: a object, not an Effect"),
                                ([Silent()], "effect 'silent': bind\\(\\) returned a NoneType, not an action")):

@@ -19,6 +19,7 @@ Examples
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 from typing import Annotated, Callable, Union
 
@@ -70,8 +71,9 @@ REGISTRY = (
 
 def check_registry(scene_tables: tuple[str, ...]) -> None:
     """Raise TypeError or ValueError naming the first entry of :data:`REGISTRY` that the scene
-    could not declare: not an :class:`~femgrid_mpm.effects.base.Effect`, listed twice, in a table the scene does not have (``scene_tables``), or
-    without a ``kind`` of its own in a table of several."""
+    could not declare: not an :class:`~femgrid_mpm.effects.base.Effect`, without a ``name`` or a
+    ``bind``, listed twice, in a table the scene does not have (``scene_tables``), or without a
+    ``kind`` of its own in a table of several."""
     from .base import Effect
 
     seen: set = set()
@@ -79,6 +81,11 @@ def check_registry(scene_tables: tuple[str, ...]) -> None:
         effect = entry.effect
         if not (isinstance(effect, type) and issubclass(effect, Effect)):  # (its stage: Effect checks it)
             raise TypeError(f"effects.REGISTRY: {effect!r} is not an Effect class (femgrid_mpm.effects.base.Effect)")
+        # without these the scene's validation or the simulation's set-up failed with a traceback
+        if not isinstance(getattr(effect, "name", None), str):
+            raise TypeError(f"effects.REGISTRY: {effect.__name__} has no name (a str: its key in the work ledger)")
+        if inspect.isabstract(effect):
+            raise TypeError(f"effects.REGISTRY: {effect.__name__} has no {', '.join(sorted(effect.__abstractmethods__))}")
         if effect in seen:
             raise ValueError(f"effects.REGISTRY: {effect.__name__} is listed twice")
         seen.add(effect)

@@ -130,6 +130,8 @@ def checked_observers(observers) -> list:
         if not isinstance(observer, Effect):
             raise TypeError(f"observers[{index}]: a {type(observer).__name__}, not an Effect "
                             "(femgrid_mpm.effects.Effect: a name, a stage and bind)")
+        if not isinstance(getattr(observer, "name", None), str):  # the set-up files its action by it
+            raise TypeError(f"observers[{index}]: a {type(observer).__name__} without a name (a str)")
     return listed
 
 
