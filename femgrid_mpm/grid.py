@@ -41,10 +41,12 @@ class Grid:
 
     Parameters
     ----------
-    basis : {"q1", "q2", "serendipity", "bspline3"}
-        Interpolation.  q1, q2 and serendipity are scikit-fem's
-        ``ElementQuad1``, ``ElementQuad2`` and ``ElementQuadS2``; bspline3 is
-        the tensor-product cubic B-spline of the paper's Eq. 23.
+    basis : str
+        Interpolation, a name of :data:`femgrid_mpm.bases.BASES` (q1, q2,
+        serendipity, bspline2(_open), bspline3(_open), gimp).  q1, q2 and
+        serendipity are scikit-fem's ``ElementQuad1``, ``ElementQuad2`` and
+        ``ElementQuadS2``; bspline3 is the tensor-product cubic B-spline of
+        the paper's Eq. 23.
     lower, upper : (float, float)
         Corners of the domain (m).
     spacing : float
@@ -324,6 +326,8 @@ def _vector(name: str, value) -> np.ndarray:
 
 
 def _points(points) -> np.ndarray:
+    if np.iscomplexobj(points):  # float() would drop the imaginary part, with a warning only
+        raise ValueError(f"points must be real numbers, got {np.asarray(points).dtype}")
     array = np.asarray(points, dtype=float)
     if array.ndim != 2 or array.shape[1] != 2:
         raise ValueError(f"points must have shape (n, 2), got {array.shape}")

@@ -263,6 +263,13 @@ def test_bad_grid_arguments(kwargs, message):
         Grid(**arguments)
 
 
+def test_complex_points_are_refused():
+    """Their imaginary part was dropped with a ComplexWarning only, as the corners' once was."""
+    grid = Grid("q1", (0.0, 0.0), (1.0, 1.0), 0.5)
+    with pytest.raises(ValueError, match="points must be real numbers, got complex128"):
+        grid.shape_functions(np.array([[0.25 + 0.5j, 0.25]]))
+
+
 @pytest.mark.parametrize("basis", BASIS_NAMES)
 def test_matrices_survive_scipy_operations_on_each_other(basis):
     """scipy sorts indices in place (e.g. in abs()); no matrix may share index
