@@ -211,15 +211,19 @@ WEAK_HINT = 0.1
 RUNAWAY_CAUSES = "a time step above the critical one, or an unstable model"
 
 
-def runaway_causes(solver, nonnegative: bool, time=None) -> str:
+def runaway_causes(solver, nonnegative: bool, time=None, damping_step: float = 0.0) -> str:
     """What a runaway's stop suggests for a scene's ``[solver]`` (and ``[time]``): with consistent
     mass on a basis whose weak nodes are lumped, also ``weak_fraction``.  A body whose edge crosses
     a node line leaves the next node a sliver of its function's volume and a mode of almost no
     mass: q1 and gimp on the drifting bar ran away at steps 24 and 21 at the default 0.01 and
     completed at 0.1.  With ``dt = "auto"``, also ``safety``: the step is the first
     configuration's, and such modes lower the critical step as the points move (consistent cubic
-    splines' block of 4e5 points: below the run's step by step 1080 of 1143, docs/time_step.md)."""
+    splines' block of 4e5 points: below the run's step by step 1080 of 1143, docs/time_step.md).
+    ``damping_step``, mass damping's ``c dt``: above 2 the damping alone amplifies a motion by
+    ``c dt - 1`` a step, which no time step below the critical one cures."""
     causes = RUNAWAY_CAUSES
+    if damping_step > 2.0:
+        causes += f"; damping.coefficient x dt = {damping_step:.6g} is above 2, where mass damping itself is unstable"
     if solver.mass == "consistent" and nonnegative and solver.weak_fraction < WEAK_HINT:
         causes += (f"; with consistent mass, nodes a body reaches by their function's tail: "
                    f"solver.weak_fraction = {WEAK_HINT:g} lumps them")
@@ -260,15 +264,19 @@ class EnergyGuard:
     floor: float
     factor: float = 10.0
     causes: str = RUNAWAY_CAUSES  # what the stop suggests (:func:`runaway_causes`)
+    #: the work ledger's names of forces that only take energy out (damping): positive work of
+    #: theirs is the instability itself (mass damping with c dt = 3 grew the bar's energy
+    #: 6e5-fold in 10 steps, its own work raising the bound in step), so it allows no more energy
+    dissipative: tuple[str, ...] = ()
 
     def bound(self, work: dict) -> float:
         """The energy (J per unit thickness) above which the run has run away."""
         return self.factor * (self.initial + self.energy_in(work) + self.floor)
 
-    @staticmethod
-    def energy_in(work: dict) -> float:
-        """``sum max(W_k, 0)``: the energy the declared forces can have put in (J per unit thickness)."""
-        return sum(w for w in work.values() if w > 0.0) if work else 0.0
+    def energy_in(self, work: dict) -> float:
+        """``sum max(W_k, 0)`` over the forces that are not :attr:`dissipative`: the energy the
+        declared forces can have put in (J per unit thickness)."""
+        return sum(w for name, w in work.items() if w > 0.0 and name not in self.dissipative) if work else 0.0
 
     def check(self, energy: float, what: str, work: dict, step: int, time: float, place=None) -> None:
         """Raise :class:`SimulationStopped` (reason ``runaway_energy``) if ``energy`` is above the bound;

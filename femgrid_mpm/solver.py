@@ -106,7 +106,10 @@ class Simulation:
                                for body, members in zip(scene.bodies, self.body_slices))
         self.energy_guard = EnergyGuard(
             initial=kinetic_energy(self.particles.mass, self.particles.v) + self.strain_energy(),
-            floor=1e-9 * stiffness_volume, causes=runaway_causes(scene.solver, self.grid.nonnegative, scene.time),
+            floor=1e-9 * stiffness_volume, causes=runaway_causes(
+                scene.solver, self.grid.nonnegative, scene.time,
+                damping_step=float(scene.damping.coefficient) * self.dt if scene.damping is not None else 0.0),
+            dissipative=tuple(effect.name for effect in acting if effect.dissipative),
         )
 
     # -- set-up -----------------------------------------------------------------

@@ -284,6 +284,26 @@ def test_work_taken_out_does_not_raise_the_runaway_bound():
     assert stop.value.reason == "runaway_energy" and "work put in 2" in str(stop.value)
 
 
+@pytest.mark.parametrize("output", [10, None])
+def test_unstable_damping_is_a_runaway_not_work_put_in(output):
+    """Mass damping with ``c dt = 3`` on a block in uniform motion: no internal force, so each
+    step multiplies the velocity by ``1 - c dt = -2`` exactly, the kinetic energy by 4.  The
+    damping's own work then came out positive (against the kick's mid velocity ``v (1 - c dt /
+    2)``) and raised the guard's bound with the energy: the bar's energy grew 6e5-fold in 10
+    steps, exit 0.  Damping puts nothing in: the run stops at step 2, where the energy is
+    16 x E0 > 10 x E0 (reference ``(1 - c dt)^4 E0``, to 1e-12), suggesting the coefficient."""
+    scene = helpers.block_scene(dt=0.01, end=0.1, every=output, damping={"kind": "mass", "coefficient": 300.0})
+    result, stop = run(scene)
+    assert stop is not None and stop.reason == "runaway_energy" and stop.step == 2
+    assert "work put in 0 " in str(stop) and "damping.coefficient x dt = 3 is above 2" in str(stop)
+    p = result.particles
+    initial = 0.5 * p.mass.sum() * (1.0**2 + 0.25**2)
+    kinetic = 0.5 * np.sum(p.mass[:, None] * p.v**2)
+    assert kinetic == pytest.approx((1 - 300.0 * 0.01) ** 4 * initial, rel=1e-12)
+    # a stable coefficient (c dt = 1.5: the velocity times -0.5 a step) completes
+    assert run(scene.with_overrides(**{"damping.coefficient": 150.0}))[1] is None
+
+
 def test_runaway_energy_via_the_command_line_exits_3_with_valid_outputs(tmp_path, capsys):
     path = tmp_path / "unstable.toml"
     path.write_text(scene_to_toml(unstable_bar(**{"output.every": 1, "output.particles": True})))

@@ -37,10 +37,14 @@ class Effect(abc.ABC):
         Its key in the work ledger and in the list of active effects.
     stage : Stage
         Where in the step its action runs.
+    dissipative : bool
+        Its force can only take energy out in the continuous problem (damping): work it books
+        as put in is the step's instability, which the runaway guard does not allow for.
     """
 
     name: ClassVar[str]
     stage: ClassVar[Stage]
+    dissipative: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs):
         # the step files every effect by its stage: one without (or with a string) would fail at

@@ -27,6 +27,9 @@ class MassDamping(Effect):
 
     name = "damping"
     stage = Stage.ADJUST_FORCE
+    # -c M v against the kick's mid velocity v (1 - c dt / 2) (no stiffness) puts energy in
+    # only where c dt > 2, where the step itself grows as (1 - c dt)^n
+    dissipative = True
 
     def bind(self, simulation):
         c = float(self.coefficient)
