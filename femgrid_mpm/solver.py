@@ -389,9 +389,10 @@ class Simulation:
         raise TypeError("a Simulation (its engine's kernels and buffers, its mass model's factors) is not "
                         "copied or pickled: take its state() and restore() it into a new Simulation of the scene")
 
-    def state(self) -> tuple[dict, dict]:
-        """What carries from one step to the next, ``(arrays, values)`` (:func:`~femgrid_mpm.state.simulation_state`)."""
-        return simulation_state(self, clock.perf_counter())
+    def state(self, copy: bool = True) -> tuple[dict, dict]:
+        """What carries from one step to the next, ``(arrays, values)`` (:func:`~femgrid_mpm.state.simulation_state`);
+        ``copy=False``: the points' arrays themselves, which the next step changes (to be saved at once)."""
+        return simulation_state(self, clock.perf_counter(), copy)
 
     def restore(self, arrays: dict, values: dict) -> None:
         """Take back :meth:`state` into a simulation built from the same scene; ValueError, this one

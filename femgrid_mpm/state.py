@@ -11,7 +11,7 @@ import copy
 import numpy as np
 
 
-def simulation_state(simulation, now: float) -> tuple[dict, dict]:
+def simulation_state(simulation, now: float, copy_arrays: bool = True) -> tuple[dict, dict]:
     """Everything that carries from one step to the next, as ``(arrays, values)``:
     numpy arrays, and plain JSON values (numbers keep every bit through
     ``repr``); ``now`` is the clock (``time.perf_counter``) for the wall time of a
@@ -26,7 +26,11 @@ def simulation_state(simulation, now: float) -> tuple[dict, dict]:
     from these at every step.
     """
     p = simulation.particles
-    arrays = {f"particles.{name}": array for name, array in p.arrays().items()}
+    # copies: the step updates the points' arrays in place, and a state kept in memory (a
+    # checkpoint callback's) then held later positions under this step's number; a writer that
+    # saves them at once need not pay for them (``copy_arrays=False``)
+    taken = np.array if copy_arrays else np.asarray
+    arrays = {f"particles.{name}": taken(array) for name, array in p.arrays().items()}
     values = {
         "step": simulation.step_index,
         "time": simulation.time,
@@ -42,7 +46,7 @@ def simulation_state(simulation, now: float) -> tuple[dict, dict]:
     history = simulation.mass.state()
     if history is not None:
         mass_arrays, values["mass"] = history
-        arrays.update({f"mass.{name}": array for name, array in mass_arrays.items()})
+        arrays.update({f"mass.{name}": taken(array) for name, array in mass_arrays.items()})
     return arrays, values
 
 

@@ -154,6 +154,22 @@ def test_quasi_static_run_resumed_comes_to_rest_at_the_same_step(tmp_path):
     assert_same_run(resumed, reference)
 
 
+def test_a_state_kept_in_memory_is_that_of_its_step():
+    """``state()`` taken in a checkpoint callback and kept while the run goes on: it held the
+    points' arrays themselves, so a restore started step 6 from step 7's points (the unstable
+    bar then stopped at step 6 instead of 7).  The reference: the run never interrupted,
+    bit for bit, and a run to its end, bit for bit too."""
+    scene = bundled_scene("vibrating_bar").with_overrides(**{"time.end": 0.3, "output.every": 10})
+    kept = {}
+    reference = Simulation(scene).run(checkpoint=lambda s: kept.setdefault(s.step_index, s.state()),
+                                      checkpoint_every=40)
+    assert sorted(kept) == [40, 80]
+    resumed = Simulation(scene)
+    resumed.restore(*kept[40])
+    assert_same_run(resumed.run(), reference)
+    assert np.array_equal(kept[80][0]["particles.x"], Simulation(scene.with_overrides(**{"time.end": 0.24})).run().particles.x)
+
+
 def test_restore_refuses_another_scene(tmp_path):
     scene = bundled_scene("vibrating_bar")
     arrays, values = Simulation(scene).state()

@@ -144,7 +144,7 @@ def run_interruptibly(simulation, outputs, progress: bool, signals: RunSignals):
         digest = scene_digest(out / SCENE_FILE)
 
         def checkpoint(simulation):
-            arrays, values = simulation.state()
+            arrays, values = simulation.state(copy=False)  # written before the next step: no copy of the points
             write_checkpoint(out / CHECKPOINT_FILE, arrays,
                              {"scene_sha256": digest, "simulation": values, "outputs": outputs.state()})
 
