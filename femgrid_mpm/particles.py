@@ -146,9 +146,10 @@ def seed_bodies(bodies, materials, spacing: float) -> Particles:
     Raises
     ------
     ValueError
-        A velocity expression that is NaN or infinite somewhere in its body.
+        A velocity expression that is NaN or infinite somewhere in its body, or whose kinetic
+        energy (with the bodies before it) is beyond 1e308 J/m.
     """
-    parts = []
+    parts, kinetic = [], 0.0
     for index, (body, material) in enumerate(zip(bodies, materials)):
         x, volume = seed_rectangle(body.lower, body.upper, spacing, body.points_per_cell)
         n = len(x)
@@ -163,6 +164,16 @@ def seed_bodies(bodies, materials, spacing: float) -> Particles:
             first = int(np.argmax(bad))
             raise ValueError(f"bodies[{index}].velocity: gives NaN or infinity at {int(bad.sum())} point(s), "
                              f"the first at ({x[first, 0]:g}, {x[first, 1]:g})")
+        # an infinite initial energy leaves the runaway guard no bound and every energy record
+        # infinite (1e160 m/s ran to its end, exit 0, with inf in each row of energy.csv)
+        with np.errstate(over="ignore"):
+            point_energy = 0.5 * material.density * volume * np.sum(v * v, axis=1)
+            kinetic += float(np.sum(point_energy))
+        if not np.isfinite(kinetic):
+            first = int(np.argmax(point_energy))
+            raise ValueError(f"bodies[{index}].velocity: a kinetic energy beyond 1e308 J/m, the most at "
+                             f"({x[first, 0]:g}, {x[first, 1]:g}) (are the velocity, the density and the sizes "
+                             "in the same units?)")
         parts.append(
             Particles(
                 x=x,

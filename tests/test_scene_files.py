@@ -397,6 +397,30 @@ def test_simulation_refuses_a_non_finite_initial_velocity():
         Simulation(scene)
 
 
+@pytest.mark.parametrize("speed", [1e160, 1e153, 1e152])
+def test_an_initial_velocity_of_infinite_kinetic_energy_is_refused(tmp_path, capsys, speed):
+    """The bar (5 x 1 m, 1e3 kg/m^3) at ``speed cos(pi x / 5)``: 1/2 m v^2 about 1250 speed^2
+    J/m.  Beyond 1e308 (1e160, 1e153 m/s) it ran to its end with exit 0 (dt = 1e-170 s),
+    every row of energy.csv infinite, energy_drift "nan" and no runaway bound: refused, nothing
+    written.  Below (1e152 m/s, 1.25e307 J/m) it runs, its energy finite."""
+    refused = 1250.0 * speed * speed > 1e308  # the reference, within a factor far from 1
+    path = tmp_path / "fast.toml"
+    path.write_text((Path(__file__).parents[1] / "femgrid_mpm" / "scenes" / "vibrating_bar.toml").read_text())
+    out = tmp_path / "out"
+    code, _, err = run_cli(["run", path, "--out", out, "--set", f'bodies.0.velocity=["{speed:g}*cos(pi*x/5)", "0"]',
+                            "--set", "time.dt=1e-170", "--set", "time.end=1e-169"], capsys)
+    if refused:
+        assert code == cli.EXIT_BAD_INPUT and not out.exists() and len(err.splitlines()) == 1
+        assert err.startswith("femgrid-mpm: error: ") and err.rstrip().endswith(
+            "bodies[0].velocity: a kinetic energy beyond 1e308 J/m, the most at (0.0833333, 0.0833333) (are the "
+            "velocity, the density and the sizes in the same units?)")
+    else:
+        assert code == cli.EXIT_DONE
+        energy = np.loadtxt(out / "energy.csv", delimiter=",", skiprows=1, ndmin=2)
+        assert np.isfinite(energy).all()
+        assert energy[0, 1] == pytest.approx(1250.0 * speed * speed, rel=0.01)  # sum of cos^2 over the points: 1/2
+
+
 def test_overlapping_bodies_are_warned_of(tmp_path, capsys):
     """Two bodies over the same space double its mass: allowed (it may be meant), but a
     one-line warning names them and the overlap; apart, there is none."""
