@@ -384,3 +384,19 @@ def test_a_stop_names_the_point_whose_volume_is_not_finite(block_scene):
         first_not_finite(p, bodies).endswith("(its volume)")
     p.x[5, 1] = np.nan
     assert "(its" not in first_not_finite(p, bodies) and "point 3 of body" not in first_not_finite(p, bodies)
+
+
+def test_a_cg_tolerance_out_of_reach_is_named_not_only_a_singular_matrix(block_scene):
+    """``cg_tolerance = 1e-300`` (in its range (0, 1)) on a mass that is not singular (the direct
+    solve and CG at 1e-6 run it): CG cannot converge, and the stop blamed only the matrix and too
+    few points per cell; it names the tolerance too, with either fallback."""
+    def scene(tolerance, solver="cg", fallback="error"):
+        return block_scene(mass="consistent", velocity=("0.1*(x-1.25)", "0"), end=0.05, solver={
+            "mass": "consistent", "linear_solver": solver, "cg_tolerance": tolerance, "consistent_fallback": fallback})
+    for reference in (scene(1e-6), scene(1e-300, "direct")):
+        assert Simulation(reference).run().status == "completed"
+    for fallback, words in (("error", "CG did not converge to solver.cg_tolerance = 1e-300 on the velocity system"),
+                            ("blend", "(velocity system, CG to solver.cg_tolerance = 1e-300)")):
+        with pytest.raises(SimulationStopped) as stop:
+            Simulation(scene(1e-300, fallback=fallback)).run()
+        assert stop.value.reason == "singular_mass" and words in str(stop.value) and stop.value.step == 0

@@ -331,7 +331,7 @@ class ConsistentMass(MassModel):
             if self.fallback != "blend":
                 how = ("a pivot of its factorization is singular" if system.layout is not None else
                        "its block near the bodies' edges has a singular pivot" if system.singular else
-                       "the direct solve left a large residual" if self._direct else "CG did not converge")
+                       "the direct solve left a large residual" if self._direct else f"CG did not converge to solver.cg_tolerance = {self.tolerance:g}")
                 raise SingularMassError(
                     f"the consistent mass matrix is singular or nearly so: {how} on the {kind} system "
                     f"(too few points per cell for the basis, or weakly supported nodes); use more points "
@@ -343,7 +343,8 @@ class ConsistentMass(MassModel):
             self._kept.pop(tuple(system.columns), None)  # the next step factors its own matrix
             solution, converged = self._solve(system, right_hand_side(), kind)
             if not converged:
-                raise SingularMassError(f"the blended mass matrix could not be solved either ({kind} system)",
+                raise SingularMassError(f"the blended mass matrix could not be solved either ({kind} system"
+                                        f"{'' if self._direct else f', CG to solver.cg_tolerance = {self.tolerance:g}'})",
                                         system.weakest_node(right_hand_side(), solution, self._direct))
         return solution
 
