@@ -269,6 +269,18 @@ class EnergyGuard:
     #: 6e5-fold in 10 steps, its own work raising the bound in step), so it allows no more energy
     dissipative: tuple[str, ...] = ()
 
+    @classmethod
+    def of(cls, simulation, acting: list, initial: float) -> "EnergyGuard":
+        """The guard of a simulation at set-up (``acting``, its declared effects; ``initial``, its
+        energy): a floor of 1e-9 x sum E V, the strain energy of a strain ~4.5e-5 throughout every body."""
+        scene = simulation.scene
+        stiffness_volume = sum(body.material.E * float(simulation.particles.volume[members].sum())
+                               for body, members in zip(scene.bodies, simulation.body_slices))
+        damping_step = float(scene.damping.coefficient) * simulation.dt if scene.damping is not None else 0.0
+        return cls(initial=initial, floor=1e-9 * stiffness_volume,
+                   causes=runaway_causes(scene.solver, simulation.grid.nonnegative, scene.time, damping_step),
+                   dissipative=tuple(effect.name for effect in acting if effect.dissipative))
+
     def bound(self, work: dict) -> float:
         """The energy (J per unit thickness) above which the run has run away."""
         return self.factor * (self.initial + self.energy_in(work) + self.floor)

@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from .diagnostics import (EnergyGuard, NegativeMassMonitor, SimulationStopped, at_rest, fastest_point, first_not_finite,
-                          points_kinetic_energy, runaway_causes, warn_of_a_long_step, warn_of_energy_drift)
+                          points_kinetic_energy, warn_of_a_long_step, warn_of_energy_drift)
 from .observers import EnergyBookkeeping, kinetic_energy
 from .effects.base import ForceNotFinite, Recorder, bound, checked_observers
 from .engines import engine_for
@@ -101,16 +101,8 @@ class Simulation:
         self._run_step = False  # set by run() for its own advance()
         #: "completed" or "stopped" once :meth:`run` has returned or raised (a second call is refused)
         self.outcome: str | None = None
-        # a floor of 1e-9 x sum E V: the strain energy of a strain ~4.5e-5 throughout every body
-        stiffness_volume = sum(body.material.E * float(self.particles.volume[members].sum())
-                               for body, members in zip(scene.bodies, self.body_slices))
-        self.energy_guard = EnergyGuard(
-            initial=kinetic_energy(self.particles.mass, self.particles.v) + self.strain_energy(),
-            floor=1e-9 * stiffness_volume, causes=runaway_causes(
-                scene.solver, self.grid.nonnegative, scene.time,
-                damping_step=float(scene.damping.coefficient) * self.dt if scene.damping is not None else 0.0),
-            dissipative=tuple(effect.name for effect in acting if effect.dissipative),
-        )
+        self.energy_guard = EnergyGuard.of(
+            self, acting, initial=kinetic_energy(self.particles.mass, self.particles.v) + self.strain_energy())
 
     # -- set-up -----------------------------------------------------------------
 

@@ -214,8 +214,7 @@ class ConsistentMass(MassModel):
 
     @property
     def _keeps_factors(self) -> bool:
-        """Whether this step's systems are factored once and kept over the next steps
-        ("auto" below :data:`DIRECT_LIMIT` active nodes)."""
+        """Whether this step's systems are factored and kept ("auto" below :data:`DIRECT_LIMIT` active nodes)."""
         return self._direct and self.linear_solver == "auto"
 
     @property
@@ -300,8 +299,7 @@ class ConsistentMass(MassModel):
             else:
                 solution = np.zeros(rhs.shape) if solution is None else solution
                 solution[:, system.columns] = solved
-        if solution is None:  # nothing to solve
-            solution = np.zeros(rhs.shape)
+        solution = np.zeros(rhs.shape) if solution is None else solution  # (None: nothing to solve)
         if self._keeps_history:
             self._previous[kind] = (*self._previous.get(kind, ())[-1:], solution)
         return solution
@@ -331,7 +329,8 @@ class ConsistentMass(MassModel):
             if self.fallback != "blend":
                 how = ("a pivot of its factorization is singular" if system.layout is not None else
                        "its block near the bodies' edges has a singular pivot" if system.singular else
-                       "the direct solve left a large residual" if self._direct else f"CG did not converge to solver.cg_tolerance = {self.tolerance:g}")
+                       "the direct solve left a large residual" if self._direct else
+                       f"CG did not converge to solver.cg_tolerance = {self.tolerance:g}")
                 raise SingularMassError(
                     f"the consistent mass matrix is singular or nearly so: {how} on the {kind} system "
                     f"(too few points per cell for the basis, or weakly supported nodes); use more points "
@@ -343,8 +342,8 @@ class ConsistentMass(MassModel):
             self._kept.pop(tuple(system.columns), None)  # the next step factors its own matrix
             solution, converged = self._solve(system, right_hand_side(), kind)
             if not converged:
-                raise SingularMassError(f"the blended mass matrix could not be solved either ({kind} system"
-                                        f"{'' if self._direct else f', CG to solver.cg_tolerance = {self.tolerance:g}'})",
+                tolerance = "" if self._direct else f", CG to solver.cg_tolerance = {self.tolerance:g}"
+                raise SingularMassError(f"the blended mass matrix could not be solved either ({kind} system{tolerance})",
                                         system.weakest_node(right_hand_side(), solution, self._direct))
         return solution
 
