@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from .particles import Particles
 
 
@@ -22,8 +24,8 @@ class RunResult:
         The final (or last good) state.
     summary : dict
         Title, basis, mass, steps, wall time, counts, negative-mass events,
-        ``energy_drift`` (:func:`femgrid_mpm.observers.energy_drift`, None
-        without energy records).
+        ``energy_drift`` (:func:`femgrid_mpm.observers.energy_drift`; without energy
+        records :func:`~femgrid_mpm.observers.energy_drift_of_ends`).
     """
 
     status: str
@@ -55,10 +57,21 @@ def run_result(simulation, status: str, message: str) -> RunResult:
         "nodes": s.grid.n_nodes,
         "effects": s.active_effects,
         "negative_mass": s.negative_mass.summary(),
-        "energy_drift": energy_drift(s.energy.rows) if s.energy else None,
+        "energy_drift": energy_drift(s.energy.rows) if s.energy else _drift_of_ends(s),
     }
     summary.update(s.mass.summary())
     for recorder in s.recorders:
         summary.update(recorder.summary())
     energy = s.energy.table() if s.energy else None
     return RunResult(status, message, energy, s.particles, summary)
+
+
+def _drift_of_ends(s) -> float | None:
+    """The energy drift of a run without energy records: from the energy it started with (the
+    runaway guard's), the one it ends with and the work the declared forces did."""
+    from .observers import energy_drift_of_ends, kinetic_energy
+
+    with np.errstate(over="ignore", invalid="ignore"):  # a state beyond 1e308: the guard stopped the run on it
+        final = kinetic_energy(s.particles.mass, s.particles.v) + s.strain_energy()
+        drift = energy_drift_of_ends(s.energy_guard.initial, final, float(sum(s.context.work.values())))
+    return drift if np.isfinite(drift) else None

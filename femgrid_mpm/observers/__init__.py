@@ -7,7 +7,7 @@ The ParaView series are written by observers of the output (:class:`femgrid_mpm.
 :class:`femgrid_mpm.output.GridSeries`), bound only when the scene's ``[output]`` asks for them.
 """
 
-from .energy import COLUMNS, EnergyBookkeeping, energy_drift, kinetic_energy
+from .energy import COLUMNS, EnergyBookkeeping, energy_drift, energy_drift_of_ends, kinetic_energy
 from .probe import Probe
 
-__all__ = ["COLUMNS", "EnergyBookkeeping", "Probe", "energy_drift", "kinetic_energy"]
+__all__ = ["COLUMNS", "EnergyBookkeeping", "Probe", "energy_drift", "energy_drift_of_ends", "kinetic_energy"]

@@ -44,12 +44,21 @@ COLUMNS = (
 def energy_drift(rows: list[dict]) -> float | None:
     """The energy balance at the last record relative to the run's energy: its
     ``total_error`` over the largest ``kinetic + strain + |external_work|`` of the records
-    (the energy the run has held or exchanged at most); None without records, 0 when
-    that scale is 0 (nothing moved, nothing worked)."""
+    (the energy the run has held or exchanged at most); None without records (see
+    :func:`energy_drift_of_ends`), 0 when that scale is 0 (nothing moved, nothing worked)."""
     if not rows:
         return None
     scale = max(row["kinetic"] + row["strain"] + abs(row["external_work"]) for row in rows)
     return float(rows[-1]["total_error"] / scale) if scale > 0 else 0.0
+
+
+def energy_drift_of_ends(initial: float, final: float, work: float) -> float:
+    """:func:`energy_drift` of a run without records, from the energies ``kinetic + strain`` it
+    started and ended with and the work put in: ``final - initial - work`` over the larger of
+    ``initial`` and ``final + |work|`` (a slow runaway below the guard's bound, 9x the energy,
+    had no measure at all without records)."""
+    scale = max(initial, final + abs(work))
+    return float((final - initial - work) / scale) if scale > 0 else 0.0
 
 
 def kinetic_energy(mass: np.ndarray, velocity: np.ndarray) -> float:
