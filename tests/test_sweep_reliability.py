@@ -11,9 +11,11 @@ import json
 import os
 import re
 import shutil
+import signal
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -329,3 +331,57 @@ def test_a_damaged_summary_of_a_finished_run_is_computed_again(finished_sweep, t
     summary[field] = value
     (copy / "summary.json").write_text(json.dumps(summary))
     assert finished_summary(copy, digest) is None
+
+
+# -- a signal to the terminal's process group -------------------------------------------
+
+
+def spawned_children(pid: int) -> list[int]:
+    """The processes ``pid`` started through multiprocessing (a local cluster's workers)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        try:
+            status = (entry / "status").read_text()
+            command = (entry / "cmdline").read_bytes()
+        except OSError:
+            continue
+        if f"\nPPid:\t{pid}\n" in status and b"spawn_main" in command:
+            found.append(int(entry.name))
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").is_file(), reason="finds the workers through /proc")
+@pytest.mark.parametrize("signum, code, moment", [(signal.SIGINT, 130, "workers starting"),
+                                                  (signal.SIGINT, 130, "run under way"),
+                                                  (signal.SIGHUP, 129, "run under way")])
+def test_a_signal_to_the_process_group_is_the_sweeps_one_line(tmp_path, signum, code, moment):
+    """Ctrl-C (or a closed terminal) signals every process of the group, a local cluster's workers
+    too: they leave it to the sweep, whose one line is all of stderr, whether the workers were
+    starting or running; no temporary of a run cut short is left."""
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scene = "{VIBRATING_BAR}"\n[vary]\n"bodies.0.points_per_cell" = [2, 3, 4, 5]\n'
+                     '[set]\n"time.end" = 2.0\n"grid.spacing" = 0.0625\n')
+    out = tmp_path / "out"
+    process = subprocess.Popen([*CLI, "sweep", str(sweep), "--out", str(out), "--workers", "2"], cwd=ROOT, env=ENV,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and process.poll() is None:
+            if moment == "workers starting" and spawned_children(process.pid):
+                break
+            if moment == "run under way" and (out / "runs").is_dir() and any(
+                    p.name.endswith(".tmp") for p in (out / "runs").iterdir()):
+                break
+            time.sleep(0.01)
+        assert process.poll() is None, "the sweep ended before the signal (make its runs longer)"
+        os.killpg(process.pid, signum)
+        _, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+    assert process.returncode == code, err
+    assert len(err.splitlines()) == 1 and err.startswith("femgrid-mpm: interrupted: "), err
+    if (out / "runs").is_dir():
+        assert not [p.name for p in (out / "runs").iterdir() if p.name.startswith(".")]

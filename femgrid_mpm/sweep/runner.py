@@ -19,6 +19,7 @@ import json
 import logging
 import os
 import shutil
+import signal
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +30,8 @@ from .table import RUNS_FILE, row, write_runs
 
 RUNS_DIRECTORY = "runs"
 MARKER_FILE = "sweep_run.json"
+#: the preload of a local cluster's workers: Ctrl-C is the client's to handle
+LOCAL_WORKER_SETUP = "femgrid_mpm.sweep.local_worker"
 #: the most processes of a local cluster (each a Python with numba, ~200 MB): more is a typo
 MAX_WORKERS = 256
 
@@ -242,43 +245,48 @@ def _run_locked(planned_runs, out: Path, lock: SweepLock, workers, scheduler, pr
         if progress is not None:
             progress.started(len(planned_runs), len(rows), [])
         return counts
+    started = False
     # no more processes than runs to compute
-    with _dask_client(min(workers or os.cpu_count() or 1, MAX_WORKERS, len(missing)), scheduler) as (client, concurrency):
-        from dask.distributed import as_completed
+    try:
+        with _dask_client(min(workers or os.cpu_count() or 1, MAX_WORKERS, len(missing)), scheduler) as (client, concurrency):
+            from dask.distributed import as_completed
 
-        start()
-        counts.workers = concurrency
-        futures = {
-            client.submit(compute_run, str(planned.scene_file), planned.overrides, str(runs_directory / planned.key),
-                          digests[planned.key], concurrency, key=f"femgrid-run-{planned.key}-{digests[planned.key][:12]}",
-                          pure=False): planned
-            for planned in missing
-        }
-        pending = list(futures)
-        if progress is not None:
-            progress.started(len(planned_runs), len(rows), [p.key for p in missing[:concurrency]])
-        try:
-            for future in as_completed(list(futures), loop=client.loop):
-                planned = futures[future]
-                pending.remove(future)
-                try:
-                    summary = future.result()
-                except Exception as error:  # noqa: BLE001 - a run that could not run is a row of the table
-                    rows[planned.key] = row(planned, None, concurrency, failure=f"{type(error).__name__}: {error}")
-                    counts.failed += 1
-                else:
-                    rows[planned.key] = row(planned, summary, concurrency)
-                    for message in summary.get("warnings", []):
-                        warnings.warn(f"run {planned.key}: {message}", RuntimeWarning, stacklevel=1)
-                    counts.computed += 1
-                write_table()
-                if progress is not None:
-                    progress.finished(planned.key, rows[planned.key]["status"],
-                                      [futures[f].key for f in pending[:concurrency]])
-        except BaseException:
-            client.cancel(pending)
-            raise
-    remove_stale(runs_directory)  # runs cut short by the end of their workers
+            start()
+            started = True
+            counts.workers = concurrency
+            futures = {
+                client.submit(compute_run, str(planned.scene_file), planned.overrides, str(runs_directory / planned.key),
+                              digests[planned.key], concurrency, key=f"femgrid-run-{planned.key}-{digests[planned.key][:12]}",
+                              pure=False): planned
+                for planned in missing
+            }
+            pending = list(futures)
+            if progress is not None:
+                progress.started(len(planned_runs), len(rows), [p.key for p in missing[:concurrency]])
+            try:
+                for future in as_completed(list(futures), loop=client.loop):
+                    planned = futures[future]
+                    pending.remove(future)
+                    try:
+                        summary = future.result()
+                    except Exception as error:  # noqa: BLE001 - a run that could not run is a row of the table
+                        rows[planned.key] = row(planned, None, concurrency, failure=f"{type(error).__name__}: {error}")
+                        counts.failed += 1
+                    else:
+                        rows[planned.key] = row(planned, summary, concurrency)
+                        for message in summary.get("warnings", []):
+                            warnings.warn(f"run {planned.key}: {message}", RuntimeWarning, stacklevel=1)
+                        counts.computed += 1
+                    write_table()
+                    if progress is not None:
+                        progress.finished(planned.key, rows[planned.key]["status"],
+                                          [futures[f].key for f in pending[:concurrency]])
+            except BaseException:
+                client.cancel(pending)
+                raise
+    finally:
+        if started:  # runs cut short by the end of their workers (an interrupt's too), once the cluster is closed
+            remove_stale(runs_directory)
     return counts
 
 
@@ -293,7 +301,18 @@ class _dask_client:
         self.logger_level: int | None = None
 
     def __enter__(self):
+        try:
+            return self._start()
+        except BaseException:  # an interrupt while it started: what was started is closed
+            self.__exit__()
+            raise
+
+    def _start(self):
+        from multiprocessing import resource_tracker
+
         from dask.distributed import Client, LocalCluster
+
+        from .local_worker import INTERRUPTS
 
         if self.scheduler:
             # the client's own logs (a lost connection, a retry) stay off stderr as the cluster's do
@@ -308,11 +327,28 @@ class _dask_client:
             # one BLAS thread per worker: runs share the cores already
             # no dashboard; its HTTP server (health checks) on a free port, not 8787 with a
             # warning when that is taken; no log of the cluster's on stderr (a run's failure
-            # is its row in runs.csv)
-            self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                        dashboard_address=None, scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
-                                        silence_logs=logging.CRITICAL + 10, env={"OPENBLAS_NUM_THREADS": "1"})
-            self.client = Client(self.cluster, set_as_default=False)
+            # is its row in runs.csv).
+            # The interrupts are blocked while the cluster starts: the threads it starts inherit
+            # the mask, and so do the processes they spawn (its workers, multiprocessing's
+            # resource tracker), which a Ctrl-C or a hang-up of the terminal's process group
+            # would otherwise end with tracebacks of their own (a worker's preload unblocks
+            # SIGTERM and ignores the others); and one that comes meanwhile is raised here once
+            # the cluster is whole, not in the middle of its start.
+            previous = signal.pthread_sigmask(signal.SIG_BLOCK, INTERRUPTS)
+            try:
+                # multiprocessing starts its resource tracker with SIGINT and SIGTERM blocked, then
+                # unblocks them in the thread that started it: started here, then blocked again,
+                # it leaves the mask of the cluster's threads alone
+                resource_tracker.ensure_running()
+                signal.pthread_sigmask(signal.SIG_BLOCK, INTERRUPTS)
+                self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                            dashboard_address=None,
+                                            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                                            silence_logs=logging.CRITICAL + 10, env={"OPENBLAS_NUM_THREADS": "1"},
+                                            preload=[LOCAL_WORKER_SETUP])
+                self.client = Client(self.cluster, set_as_default=False)
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, previous)
             concurrency = self.workers
         return self.client, concurrency
 
