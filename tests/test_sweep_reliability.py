@@ -300,6 +300,8 @@ def test_a_runs_csv_saved_with_a_byte_order_mark_reads_as_without(finished_sweep
     (replaced("error_max", "inf"), "line 2: error_max: must be finite in a completed run"),
     (replaced("steps", "2.5"), "line 2: steps: must be a whole number"),
     (replaced("status", "done"), "line 2: status: 'done' is not one of"),
+    (replaced("spacing", ""), "line 2: spacing: is empty"),
+    (replaced("dt", ""), "line 2: dt: is empty"),
     (lambda lines: "\n".join([lines[0].replace("grid.spacing", "spacing", 1), *lines[1:]]).encode() + b"\n",
      "the column 'spacing' twice"),
 ])
@@ -311,6 +313,16 @@ def test_a_damaged_runs_csv_is_one_line_naming_file_and_line(finished_sweep, tmp
     copy = damaged(out, tmp_path, change)
     one_line_error(*run_cli(["report", copy]), str(copy / "runs.csv"), problem)
     assert not (copy / "report.md").exists()
+
+
+def test_a_failed_run_reads_without_a_time_step(finished_sweep, tmp_path):
+    """A failed run's row has no time step (it never ran), but its spacing, its scene's."""
+    from femgrid_mpm.sweep.table import read_runs
+
+    _, out, _ = finished_sweep
+    copy = damaged(out, tmp_path, lambda lines: replaced("dt", "")([lines[0], lines[1].replace(",completed,", ",failed,")]))
+    _, rows = read_runs(copy / "runs.csv")
+    assert rows[0]["status"] == "failed" and rows[0]["dt"] is None and rows[0]["spacing"] == 0.5
 
 
 @pytest.mark.parametrize("field, value", [("reference", [1]), ("wall_time", "fast"), ("steps", True),

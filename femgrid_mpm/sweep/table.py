@@ -98,6 +98,9 @@ STATUSES = ("completed", "stopped", "failed")
 #: what a number of a column must be: > 0 (finite), a whole number >= 0, >= 0; the others finite
 POSITIVE_COLUMNS = ("dt", "spacing", "workers")
 COUNT_COLUMNS = ("steps", "points", "nodes")
+#: the report's axes, which it sorts and draws the runs along: a row's spacing is its scene's, and a
+#: run that ran (all but a failed one) has its time step
+AXIS_COLUMNS = ("spacing", "dt")
 #: may be non-finite in a run that did not complete (a state that blew up); never negative
 ERROR_COLUMNS = ("error_end", "error_max", "cg_iterations")
 #: the critical step is infinite or not positive when no step is stable or none is limited;
@@ -156,6 +159,8 @@ def parsed_row(path: Path, line: int, header: list[str], record: list[str]) -> d
     for column in NUMBER_COLUMNS:
         cell = parsed[column]
         if cell == "":
+            if column in AXIS_COLUMNS and (column == "spacing" or parsed["status"] != "failed"):
+                raise ValueError(f"{path}: line {line}: {column}: is empty (a {parsed['status']} run has one)")
             parsed[column] = None
             continue
         try:
