@@ -397,3 +397,23 @@ def test_a_signal_to_the_process_group_is_the_sweeps_one_line(tmp_path, signum, 
     assert len(err.splitlines()) == 1 and err.startswith("femgrid-mpm: interrupted: "), err
     if (out / "runs").is_dir():
         assert not [p.name for p in (out / "runs").iterdir() if p.name.startswith(".")]
+
+
+def test_a_run_that_cannot_write_its_files_is_a_failed_write(tmp_path):
+    """A run whose files do not fit (here a file-size limit, as a full disk) is a failed row, and
+    the sweep's exit code is 1 (cannot write outputs), not 2 (bad input)."""
+    import resource
+
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scene = "{VIBRATING_BAR}"\n[vary]\n"grid.spacing" = [0.0625]\n[set]\n"time.end" = 0.01\n')
+    out = tmp_path / "out"
+    limit = 500_000  # above runs.csv and the report of a failed run, below the run's final.npz (1.7 MB)
+    result = subprocess.run([*CLI, "sweep", str(sweep), "--out", str(out), "--workers", "1"], cwd=ROOT, env=ENV,
+                            capture_output=True, text=True, timeout=600,
+                            preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit)))
+    assert result.returncode == 1, result.stderr
+    assert result.stderr.startswith(f"femgrid-mpm: error: cannot write the sweep's outputs in {out}: 1 run(s)")
+    assert len(result.stderr.splitlines()) == 1, result.stderr
+    (row,) = [line.split(",") for line in (out / "runs.csv").read_text().splitlines()[1:]]
+    assert row[1] == "failed" and "File too large" in (out / "runs.csv").read_text()
+    assert [p.name for p in (out / "runs").iterdir()] == []

@@ -73,6 +73,10 @@ def sweep(args) -> int:
     written = write_report(out, quiet=stdout_failed is not None)
     if written != EXIT_DONE:
         return written
+    if counts.unwritten:  # a full disk or a read-only directory is a failed write, not bad input
+        say("error", f"cannot write the sweep's outputs in {out}: {counts.unwritten} run(s) could not write their "
+                     f"files (run {counts.write_error}); their reason is in {out / 'runs.csv'}")
+        return EXIT_WRITE_FAILED
     if counts.failed:
         say("error", f"{counts.failed} run(s) could not run: their reason is in {out / 'runs.csv'}")
         return EXIT_BAD_INPUT

@@ -48,12 +48,15 @@ class SweepProgress(Protocol):
 
 @dataclass
 class SweepCounts:
-    """How many runs a sweep computed, reused from an earlier sweep, and how many failed."""
+    """How many runs a sweep computed, reused from an earlier sweep, and how many failed; of
+    those, how many could not write their files (a full disk), with the first such error."""
 
     computed: int = 0
     reused: int = 0
     failed: int = 0
     workers: int = 0
+    unwritten: int = 0
+    write_error: str = ""
 
 
 def run_digest(planned) -> str:
@@ -272,6 +275,9 @@ def _run_locked(planned_runs, out: Path, lock: SweepLock, workers, scheduler, pr
                     except Exception as error:  # noqa: BLE001 - a run that could not run is a row of the table
                         rows[planned.key] = row(planned, None, concurrency, failure=f"{type(error).__name__}: {error}")
                         counts.failed += 1
+                        if isinstance(error, OSError) and error.errno is not None:  # not a lost connection's
+                            counts.unwritten += 1
+                            counts.write_error = counts.write_error or f"{planned.key}: {error}"
                     else:
                         rows[planned.key] = row(planned, summary, concurrency)
                         for message in summary.get("warnings", []):
