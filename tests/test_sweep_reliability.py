@@ -417,3 +417,42 @@ def test_a_run_that_cannot_write_its_files_is_a_failed_write(tmp_path):
     (row,) = [line.split(",") for line in (out / "runs.csv").read_text().splitlines()[1:]]
     assert row[1] == "failed" and "File too large" in (out / "runs.csv").read_text()
     assert [p.name for p in (out / "runs").iterdir()] == []
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def test_a_scheduler_lost_midway_is_the_sweeps_lines_alone(tmp_path):
+    """The scheduler of ``--scheduler`` killed while a run is under way: the runs not finished are
+    failed rows (tried again by the next sweep) and stderr holds the sweep's line alone, none of
+    the Dask client's logs of its reconnection (an ERROR with a traceback)."""
+    address = f"tcp://127.0.0.1:{free_port()}"
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                                  "--port", address.rsplit(":", 1)[1], "--dashboard-address", ":0"],
+                                 env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
+                               "--no-dashboard"], cwd=ROOT, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scene = "{VIBRATING_BAR}"\n[vary]\n"bodies.0.points_per_cell" = [2, 3, 4]\n'
+                     '[set]\n"time.end" = 2.0\n"grid.spacing" = 0.0625\n')
+    out = tmp_path / "out"
+    try:
+        process = subprocess.Popen([*CLI, "sweep", str(sweep), "--out", str(out), "--scheduler", address], cwd=ROOT,
+                                   env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and process.poll() is None:
+            if (out / "runs").is_dir() and any(p.name.endswith(".tmp") for p in (out / "runs").iterdir()):
+                break
+            time.sleep(0.01)
+        scheduler.kill()
+        _, err = process.communicate(timeout=120)
+    finally:
+        for started in (scheduler, worker):
+            started.kill()
+            started.wait()
+    assert len(err.splitlines()) == 1 and err.startswith("femgrid-mpm: error: "), err
+    rows = (out / "runs.csv").read_text().splitlines()[1:]
+    assert rows and all(",failed," in line and "scheduler" in line for line in rows if ",completed," not in line)

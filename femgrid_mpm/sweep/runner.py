@@ -304,7 +304,8 @@ class _dask_client:
         self.workers = workers or os.cpu_count() or 1
         self.scheduler = scheduler
         self.cluster = self.client = None
-        self.logger_level: int | None = None
+        #: the levels of the handlers of Dask's logs, silenced while the client runs
+        self.handler_levels: dict = {}
 
     def __enter__(self):
         try:
@@ -321,9 +322,12 @@ class _dask_client:
         from .local_worker import INTERRUPTS
 
         if self.scheduler:
-            # the client's own logs (a lost connection, a retry) stay off stderr as the cluster's do
-            self.logger_level = logging.getLogger("distributed").level
-            logging.getLogger("distributed").setLevel(logging.CRITICAL + 10)
+            # the client's own logs (a lost connection, a retry) stay off stderr as the cluster's do: its
+            # handler is silenced, as LocalCluster's silence_logs does (a level on the "distributed" logger
+            # does not filter the records of "distributed.client", which has a level of its own)
+            self.handler_levels = {handler: handler.level for handler in logging.getLogger("distributed").handlers}
+            for handler in self.handler_levels:
+                handler.setLevel(logging.CRITICAL + 10)
             try:
                 self.client = Client(self.scheduler, timeout="10s", set_as_default=False)
             except (OSError, TimeoutError) as error:
@@ -363,6 +367,6 @@ class _dask_client:
             self.client.close()
         if self.cluster is not None:
             self.cluster.close()
-        if self.logger_level is not None:
-            logging.getLogger("distributed").setLevel(self.logger_level)
+        for handler, level in self.handler_levels.items():
+            handler.setLevel(level)
         return False
