@@ -365,11 +365,13 @@ def spawned_children(pid: int) -> list[int]:
 @pytest.mark.skipif(not Path("/proc/self/status").is_file(), reason="finds the workers through /proc")
 @pytest.mark.parametrize("signum, code, moment", [(signal.SIGINT, 130, "workers starting"),
                                                   (signal.SIGINT, 130, "run under way"),
-                                                  (signal.SIGHUP, 129, "run under way")])
+                                                  (signal.SIGHUP, 129, "run under way"),
+                                                  (signal.SIGTERM, 143, "run under way")])
 def test_a_signal_to_the_process_group_is_the_sweeps_one_line(tmp_path, signum, code, moment):
     """Ctrl-C (or a closed terminal) signals every process of the group, a local cluster's workers
     too: they leave it to the sweep, whose one line is all of stderr, whether the workers were
-    starting or running; no temporary of a run cut short is left."""
+    starting or running; no temporary of a run cut short is left.  A SIGTERM ends the workers,
+    and the cluster's logs of their lost connections stay off stderr."""
     sweep = tmp_path / "sweep.toml"
     sweep.write_text(f'scene = "{VIBRATING_BAR}"\n[vary]\n"bodies.0.points_per_cell" = [2, 3, 4, 5]\n'
                      '[set]\n"time.end" = 2.0\n"grid.spacing" = 0.0625\n')
@@ -456,3 +458,32 @@ def test_a_scheduler_lost_midway_is_the_sweeps_lines_alone(tmp_path):
     assert len(err.splitlines()) == 1 and err.startswith("femgrid-mpm: error: "), err
     rows = (out / "runs.csv").read_text().splitlines()[1:]
     assert rows and all(",failed," in line and "scheduler" in line for line in rows if ",completed," not in line)
+
+
+def test_dask_logs_during_the_cluster_close_stay_off_stderr(monkeypatch):
+    """The local cluster's silence of Dask's logs ends inside its close, before the close has
+    ended: a record then (a worker's lost connection after a SIGTERM) reached stderr."""
+    import io
+    import logging
+
+    from dask.distributed import LocalCluster
+
+    from femgrid_mpm.sweep.runner import _dask_client
+
+    close = LocalCluster.close
+
+    def close_and_log(self, *args, **kwargs):
+        result = close(self, *args, **kwargs)
+        logging.getLogger("distributed.batched").error("Batched Comm Closed")
+        return result
+
+    monkeypatch.setattr(LocalCluster, "close", close_and_log)
+    stderr = io.StringIO()
+    handler = logging.StreamHandler(stderr)  # as distributed's own handler on stderr
+    logging.getLogger("distributed").addHandler(handler)
+    try:
+        with _dask_client(1, None):
+            pass
+    finally:
+        logging.getLogger("distributed").removeHandler(handler)
+    assert stderr.getvalue() == ""

@@ -321,13 +321,14 @@ class _dask_client:
 
         from .local_worker import INTERRUPTS
 
+        # Dask's logs (a lost connection, a retry, a worker ended by a signal) stay off stderr to the
+        # end of the close: the handler of its "distributed" logger is silenced (a level on that logger
+        # does not filter "distributed.client", which has a level of its own, and LocalCluster's
+        # silence_logs ends before its close has finished)
+        self.handler_levels = {handler: handler.level for handler in logging.getLogger("distributed").handlers}
+        for handler in self.handler_levels:
+            handler.setLevel(logging.CRITICAL + 10)
         if self.scheduler:
-            # the client's own logs (a lost connection, a retry) stay off stderr as the cluster's do: its
-            # handler is silenced, as LocalCluster's silence_logs does (a level on the "distributed" logger
-            # does not filter the records of "distributed.client", which has a level of its own)
-            self.handler_levels = {handler: handler.level for handler in logging.getLogger("distributed").handlers}
-            for handler in self.handler_levels:
-                handler.setLevel(logging.CRITICAL + 10)
             try:
                 self.client = Client(self.scheduler, timeout="10s", set_as_default=False)
             except (OSError, TimeoutError) as error:
