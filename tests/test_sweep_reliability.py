@@ -487,3 +487,16 @@ def test_dask_logs_during_the_cluster_close_stay_off_stderr(monkeypatch):
     finally:
         logging.getLogger("distributed").removeHandler(handler)
     assert stderr.getvalue() == ""
+
+
+@pytest.mark.parametrize("workers", [0, -1, 2.5, True])
+def test_run_sweep_refuses_a_count_of_workers_that_is_not_one_or_more(tmp_path, workers):
+    """``run_sweep(..., workers=-1)`` started a cluster of no worker and waited for ever; 0 ran on
+    every core, where ``--workers 0`` is refused."""
+    from femgrid_mpm.sweep import plan, read_sweep, run_sweep
+
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scene = "{VIBRATING_BAR}"\n[vary]\n"grid.spacing" = [0.5]\n[set]\n"time.end" = 0.03\n')
+    with pytest.raises(ValueError, match=r"^workers: must be a whole number of at least 1"):
+        run_sweep(plan(read_sweep(sweep), sweep), tmp_path / "out", workers=workers)
+    assert not (tmp_path / "out").exists()

@@ -206,7 +206,13 @@ def run_sweep(planned_runs: list, out: Path, *, workers: int | None = None, sche
         :class:`SweepBusy` if another sweep holds ``out`` (:class:`SweepLock`).
     KeyboardInterrupt
         After closing the cluster; the finished runs and ``runs.csv`` are kept.
+    ValueError
+        If ``workers`` is not a whole number of at least 1 (before anything is written: a cluster of
+        no worker would wait for ever).
     """
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise ValueError(f"workers: must be a whole number of at least 1, or None for the number of cores "
+                         f"(got {workers!r})")
     out = Path(out)
     lock = SweepLock(out)
     if out.is_dir():  # refused before a cluster is started
