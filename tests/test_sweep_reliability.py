@@ -500,3 +500,20 @@ def test_run_sweep_refuses_a_count_of_workers_that_is_not_one_or_more(tmp_path, 
     with pytest.raises(ValueError, match=r"^workers: must be a whole number of at least 1"):
         run_sweep(plan(read_sweep(sweep), sweep), tmp_path / "out", workers=workers)
     assert not (tmp_path / "out").exists()
+
+
+def test_a_run_whose_records_exceed_max_bytes_is_a_failed_row(tmp_path, run_cli):
+    """``run`` refuses a scene whose records would exceed ``output.max_bytes`` (exit 2); the same run
+    in a sweep wrote them all (a run of the sweep is the run ``run`` makes with the same keys)."""
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scene = "{VIBRATING_BAR}"\nparticles = true\n[vary]\n"grid.spacing" = [0.5]\n[set]\n'
+                     '"time.end" = 0.5\n"output.every" = 1\n"output.particles" = true\n"output.max_bytes" = 1000\n')
+    code, _, err = run_cli(["run", VIBRATING_BAR, "--out", tmp_path / "single", "--set", "time.end=0.5",
+                            "--set", "output.every=1", "--set", "output.particles=true", "--set", "output.max_bytes=1000",
+                            "--set", "grid.spacing=0.5"])
+    assert code == 2 and "more than output.max_bytes = 1e+03" in err
+    code, out, err = run_cli(["sweep", sweep, "--out", tmp_path / "out", "--workers", "1"])
+    assert code == 2 and "1 runs: 0 computed (1 at once), 0 reused, 1 failed" in out, err
+    table = (tmp_path / "out" / "runs.csv").read_text()
+    assert ",failed," in table and "more than output.max_bytes = 1e+03" in table
+    assert list((tmp_path / "out" / "runs").iterdir()) == []

@@ -111,13 +111,15 @@ def compute_run(scene_file: str, overrides: dict, directory: str, digest: str, w
     Raises
     ------
     ValueError
-        If the simulation cannot be built from the scene (e.g. a support selects no node).
+        If the simulation cannot be built from the scene (e.g. a support selects no node), or its
+        records would exceed ``output.max_bytes``.
     OSError
         If the files cannot be written.
     """
     from ..diagnostics import SimulationStopped
     from ..output import RunOutputs, atomic_write
     from ..scene import load_scene
+    from ..scene.limits import check_records
     from ..solver import Simulation
 
     final = Path(directory)
@@ -130,6 +132,8 @@ def compute_run(scene_file: str, overrides: dict, directory: str, digest: str, w
             outputs = RunOutputs(temporary, scene, source=scene_file, overrides=overrides)
             _warm_up(scene)
             simulation = Simulation(scene, observers=outputs.observers)
+            # records beyond output.max_bytes are refused as `run` refuses them (a run goes to its end)
+            check_records(scene, simulation.n_steps, simulation.particles.n, simulation.grid.n_nodes)
             _estimate_critical_dt(simulation)
             outputs.start(simulation)
             try:
