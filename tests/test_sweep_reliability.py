@@ -517,3 +517,28 @@ def test_a_run_whose_records_exceed_max_bytes_is_a_failed_row(tmp_path, run_cli)
     table = (tmp_path / "out" / "runs.csv").read_text()
     assert ",failed," in table and "more than output.max_bytes = 1e+03" in table
     assert list((tmp_path / "out" / "runs").iterdir()) == []
+
+
+@pytest.mark.parametrize("name", ["summary.json", "sweep_run.json"])
+def test_a_fifo_in_a_finished_runs_file_is_no_run_and_does_not_block(finished_sweep, tmp_path, name):
+    """A FIFO in the place of a run's summary.json (or its digest) was opened for reading, and the
+    sweep waited for a writer for ever; it is no finished run, as a summary that is not a regular
+    file reads as no summary for ``resume``."""
+    import threading
+
+    from femgrid_mpm.sweep.runner import finished_summary
+
+    _, out, _ = finished_sweep
+    copy = tmp_path / "q"
+    shutil.copytree(out / "runs" / "0.5", copy)
+    (copy / name).unlink()
+    os.mkfifo(copy / name)
+    found = []
+    reader = threading.Thread(target=lambda: found.append(finished_summary(copy, "any digest")), daemon=True)
+    reader.start()
+    reader.join(timeout=20)
+    blocked = reader.is_alive()
+    if blocked:  # let the blocked open end
+        os.close(os.open(copy / name, os.O_WRONLY | os.O_NONBLOCK))
+        reader.join(timeout=20)
+    assert not blocked and found == [None]

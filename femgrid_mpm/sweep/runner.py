@@ -72,10 +72,11 @@ def run_digest(planned) -> str:
 def finished_summary(directory: Path, digest: str) -> dict | None:
     """The summary of the finished run in ``directory`` if it ran ``digest``, else None."""
     from ..output import SUMMARY_FILE
+    from ..reading import read_regular_file
 
-    try:
-        marker = json.loads((directory / MARKER_FILE).read_text())
-        summary = json.loads((directory / SUMMARY_FILE).read_text())
+    try:  # a FIFO in a file's place is not opened for reading (it would block the sweep): no run
+        marker = json.loads(read_regular_file(directory / MARKER_FILE))
+        summary = json.loads(read_regular_file(directory / SUMMARY_FILE))
     except (OSError, ValueError):
         return None
     if not isinstance(marker, dict) or not isinstance(summary, dict) or marker.get("digest") != digest:
