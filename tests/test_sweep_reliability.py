@@ -48,6 +48,19 @@ def test_a_directory_where_an_output_goes_is_refused_before_any_run(tmp_path, ru
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [name]
 
 
+@pytest.mark.parametrize("make", [lambda path: path.write_text("x"), lambda path: path.symlink_to(path.parent / "gone")])
+def test_a_file_where_the_runs_directory_goes_is_refused_before_any_run(tmp_path, run_cli, make):
+    """A file (or a dangling link) at ``DIR/runs``: the cluster was started and ``sweep.toml``
+    written before ``mkdir`` failed, exit 1 ("File exists")."""
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scene = "{VIBRATING_BAR}"\n[vary]\n"grid.spacing" = [0.5]\n[set]\n"time.end" = 0.01\n')
+    (tmp_path / "out").mkdir()
+    make(tmp_path / "out" / "runs")
+    one_line_error(*run_cli(["sweep", sweep, "--out", tmp_path / "out", "--workers", "1"]),
+                   f"{tmp_path / 'out' / 'runs'}: is not a directory")
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["runs"]
+
+
 @pytest.mark.parametrize("name", ["runs.csv", "report.md", "report.html", "sweep.toml", "cost.png"])
 def test_a_sweep_file_named_like_an_output_is_refused(tmp_path, run_cli, name):
     (tmp_path / "bar.toml").write_bytes(VIBRATING_BAR.read_bytes())

@@ -89,7 +89,8 @@ def refuse_inputs_as_outputs(out: Path, inputs: dict[str, Path]) -> None:
     """Raise :class:`BadInput` if the sweep into ``out`` would write over, replace or remove one of
     its ``inputs`` (the sweep file, the scene file): one named like a file the sweep writes in
     ``out`` (symbolic and hard links resolved with ``os.path.samefile``), or any file under
-    ``out/runs/``, where runs are replaced and temporaries removed.  Touches no file."""
+    ``out/runs/``, where runs are replaced and temporaries removed; or if ``out/runs`` is not a
+    directory (a file, a dangling link).  Touches no file."""
     from ..output import _same_file
     from ..sweep import RUNS_FILE
     from ..sweep.report import FIGURES, HTML_FILE, REPORT_FILE
@@ -104,6 +105,9 @@ def refuse_inputs_as_outputs(out: Path, inputs: dict[str, Path]) -> None:
                                "give another --out directory")
     runs = out / RUNS_DIRECTORY
     if not runs.is_dir():
+        if runs.exists() or runs.is_symlink():  # found now, not once the cluster has started
+            raise BadInput(f"{runs}: is not a directory, where the sweep's runs go; move it or give another "
+                           "directory")
         return
     identities = {}
     for what, source in inputs.items():
