@@ -555,3 +555,16 @@ def test_a_fifo_in_a_finished_runs_file_is_no_run_and_does_not_block(finished_sw
         os.close(os.open(copy / name, os.O_WRONLY | os.O_NONBLOCK))
         reader.join(timeout=20)
     assert not blocked and found == [None]
+
+
+def test_a_name_too_long_is_refused_before_any_run(tmp_path, run_cli):
+    """``report`` of a directory named longer than the file system allows was a traceback; ``sweep``
+    into a folder of such a name to make was exit 1 once its cluster had started (``run`` refuses
+    both, exit 2)."""
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scene = "{VIBRATING_BAR}"\n[vary]\n"grid.spacing" = [0.5]\n[set]\n"time.end" = 0.01\n')
+    long = "a" * 300
+    one_line_error(*run_cli(["report", tmp_path / long]), "cannot be used: File name too long")
+    one_line_error(*run_cli(["sweep", sweep, "--out", tmp_path / "x" / long / "y", "--workers", "1"]),
+                   "cannot be used: File name too long")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sweep.toml"]

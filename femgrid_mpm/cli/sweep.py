@@ -9,6 +9,7 @@ status ``failed`` (exit 2 once the others have run).
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 from pathlib import Path
@@ -140,11 +141,19 @@ def refuse_directories(written: list[Path]) -> None:
 def writable(out: Path) -> None:
     """Raise :class:`BadInput` unless ``out``, or the nearest folder above it that exists, can be written
     (checked without writing: a sweep writes nothing before its cluster is reached)."""
-    place = out
+    place, missing = out, []
     while not place.exists() and place != place.parent:
+        missing.append(os.fsencode(place.name))
         place = place.parent
     if not place.is_dir() or not os.access(place, os.W_OK | os.X_OK):
         raise BadInput(f"--out {out}: cannot write there ({place} is not a writable directory)")
+    try:  # a folder to make with a name too long: refused now, as run refuses it, not after the cluster started
+        longest = os.pathconf(place, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        return
+    if any(len(name) > longest for name in missing):
+        raise BadInput(f"--out {out}: cannot be used: {os.strerror(errno.ENAMETOOLONG)} (a name of more than "
+                       f"{longest} bytes)")
 
 
 def report(args) -> int:
@@ -154,7 +163,11 @@ def report(args) -> int:
     from ..sweep.report import FIGURES, HTML_FILE, REPORT_FILE
 
     directory = Path(args.directory)
-    if not (directory / RUNS_FILE).is_file():
+    try:
+        found = (directory / RUNS_FILE).is_file()
+    except OSError as error:  # a name longer than the file system allows
+        raise BadInput(f"{directory}: cannot be used: {error.strerror or error}") from None
+    if not found:
         raise BadInput(f"{directory}: has no {RUNS_FILE} (the --out directory of femgrid-mpm sweep)")
     refuse_directories([directory / name for name in (REPORT_FILE, HTML_FILE, *FIGURES.values())])
     return write_report(directory)
