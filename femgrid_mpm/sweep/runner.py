@@ -330,7 +330,7 @@ class _dask_client:
 
         from dask.distributed import Client, LocalCluster
 
-        from .local_worker import INTERRUPTS
+        from .local_worker import TERMINAL_SIGNALS
 
         # Dask's logs (a lost connection, a retry, a worker ended by a signal) stay off stderr to the
         # end of the close: the handler of its "distributed" logger is silenced (a level on that logger
@@ -350,19 +350,20 @@ class _dask_client:
             # no dashboard; its HTTP server (health checks) on a free port, not 8787 with a
             # warning when that is taken; no log of the cluster's on stderr (a run's failure
             # is its row in runs.csv).
-            # The interrupts are blocked while the cluster starts: the threads it starts inherit
+            # SIGINT and SIGHUP are blocked while the cluster starts: the threads it starts inherit
             # the mask, and so do the processes they spawn (its workers, multiprocessing's
             # resource tracker), which a Ctrl-C or a hang-up of the terminal's process group
-            # would otherwise end with tracebacks of their own (a worker's preload unblocks
-            # SIGTERM and ignores the others); and one that comes meanwhile is raised here once
-            # the cluster is whole, not in the middle of its start.
-            previous = signal.pthread_sigmask(signal.SIG_BLOCK, INTERRUPTS)
+            # would otherwise end with tracebacks of their own (a worker's preload then ignores
+            # them); and one that comes meanwhile is raised here once the cluster is whole, not
+            # in the middle of its start.  SIGTERM is not delayed: a supervisor's stop, or the
+            # way out of a start that hangs.
+            previous = signal.pthread_sigmask(signal.SIG_BLOCK, TERMINAL_SIGNALS)
             try:
                 # multiprocessing starts its resource tracker with SIGINT and SIGTERM blocked, then
-                # unblocks them in the thread that started it: started here, then blocked again,
-                # it leaves the mask of the cluster's threads alone
+                # unblocks them in the thread that started it: started here, then SIGINT blocked
+                # again, it leaves the mask of the cluster's threads alone
                 resource_tracker.ensure_running()
-                signal.pthread_sigmask(signal.SIG_BLOCK, INTERRUPTS)
+                signal.pthread_sigmask(signal.SIG_BLOCK, TERMINAL_SIGNALS)
                 self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                             dashboard_address=None,
                                             scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
