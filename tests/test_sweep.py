@@ -265,6 +265,8 @@ def test_a_changed_scene_is_run_again(tmp_path, run_cli):
     ('scene = "vibrating_bar"\n[vary]\n"grid.basis" = ["q1"]\n[[skip]]\n"grid.spacing" = 0.5\n', "skip[0]"),
     ('scene = "vibrating_bar"\n[vary]\n"grid.basis" = ["q1", "q2"]\n[[skip]]\n"grid.basis" = "q3"\n', "skip[0]"),
     ('scene = "vibrating_bar"\n[vary]\n"grid.basis" = ["q1"]\n[[skip]]\n"grid.basis" = "q1"\n', "skip"),
+    # an empty list matched nothing: the entry was taken and left nothing out
+    ('scene = "vibrating_bar"\n[vary]\n"grid.basis" = ["q1", "q2"]\n[[skip]]\n"grid.basis" = []\n', "skip[0]: grid.basis = []"),
 ])
 def test_a_bad_sweep_file_is_one_line_and_nothing_runs(tmp_path, run_cli, content, key):
     path = tmp_path / "bad.toml"

@@ -132,12 +132,15 @@ def test_run_keys_of_many_runs_are_those_of_few():
                                                ("--scheduler=foo", "--scheduler: expected tcp://HOST:PORT"),
                                                ("--scheduler=http://x", "--scheduler: expected tcp://HOST:PORT"),
                                                ("--scheduler=tcp://host", "--scheduler: expected tcp://HOST:PORT"),
-                                               ("--scheduler=tcp://host:99999", "--scheduler: expected tcp://HOST:PORT")])
+                                               ("--scheduler=tcp://host:99999", "--scheduler: expected tcp://HOST:PORT"),
+                                               # the count of a local cluster went unused with --scheduler
+                                               ("--workers=2 --scheduler=tcp://127.0.0.1:8786",
+                                                "argument --scheduler: not allowed with argument --workers")])
 def test_workers_and_scheduler_are_checked_at_once(tmp_path, run_cli, argument, problem):
     """Old: --workers 10000 started 10000 processes; --scheduler foo a traceback after 21 s."""
     sweep = tmp_path / "sweep.toml"
     sweep.write_text(f'scene = "{VIBRATING_BAR}"\n[vary]\n"grid.spacing" = [0.5]\n')
-    one_line_error(*run_cli(["sweep", sweep, "--out", tmp_path / "out", argument]), problem)
+    one_line_error(*run_cli(["sweep", sweep, "--out", tmp_path / "out", *argument.split()]), problem)
     assert not (tmp_path / "out").exists()
 
 
@@ -410,6 +413,8 @@ def test_a_signal_to_the_process_group_is_the_sweeps_one_line(tmp_path, signum, 
             process.wait()
     assert process.returncode == code, err
     assert len(err.splitlines()) == 1 and err.startswith("femgrid-mpm: interrupted: "), err
+    # it says runs are kept only where a runs.csv keeps them
+    assert ("the finished runs are kept in" in err) == (out / "runs.csv").is_file(), err
     if (out / "runs").is_dir():
         assert not [p.name for p in (out / "runs").iterdir() if p.name.startswith(".")]
 

@@ -109,11 +109,12 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("sweep", type=given_path, metavar="SWEEP.toml", help="the sweep file")
     sweep.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing; a rerun "
                        "into it computes only the runs missing)")
-    sweep.add_argument("--workers", type=workers_count, default=default_workers(), metavar="N",
-                       help="runs at once on a local Dask cluster (default: the number of cores, here "
-                       f"{default_workers()}; at most the runs missing; 1 for timing-grade wall times)")
-    sweep.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT", help="run on an existing Dask cluster instead "
-                       "(its workers must see DIR and the scene file at the same paths)")
+    cluster = sweep.add_mutually_exclusive_group()  # a count given with --scheduler would go unused
+    cluster.add_argument("--workers", type=workers_count, metavar="N",
+                         help="runs at once on a local Dask cluster (default: the number of cores, here "
+                         f"{default_workers()}; at most the runs missing; 1 for timing-grade wall times)")
+    cluster.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT", help="run on an existing Dask cluster "
+                         "instead (its workers must see DIR and the scene file at the same paths)")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar (it is shown only when stderr is a terminal)")
 
     report = commands.add_parser("report", help="write a sweep's report (report.md, report.html, figures) from its runs.csv")

@@ -49,13 +49,18 @@ def sweep(args) -> int:
 
     bar = SweepBar(enabled=not args.no_progress and sys.stderr.isatty())
     try:
-        counts = run_sweep(runs, out, workers=args.workers, scheduler=args.scheduler, progress=bar, prepare=prepare)
+        counts = run_sweep(runs, out, workers=args.workers or (None if args.scheduler else default_workers()),
+                           scheduler=args.scheduler, progress=bar, prepare=prepare)
     except SweepBusy as error:
         bar.close()
         raise BadInput(str(error)) from None
     except KeyboardInterrupt:
         bar.close()
-        say("interrupted", f"the finished runs are kept in {out} (runs.csv); run the sweep again to compute the rest")
+        from ..sweep import RUNS_FILE
+
+        kept = f"the finished runs are kept in {out} (runs.csv)" if (out / RUNS_FILE).is_file() else \
+            f"before any run was computed (nothing in {out} to keep)"
+        say("interrupted", f"{kept}; run the sweep again to compute the rest")
         return EXIT_INTERRUPTED
     except OSError as error:
         bar.close()

@@ -153,6 +153,8 @@ def read_sweep(path) -> SweepSpec:
         for key, values in entry.items():
             if normal_key(key) not in varied:
                 raise SweepError(f"{path}: skip[{index}]: {key!r} is not a key of [vary]")
+            if values == []:  # matches no value: the entry would leave nothing out, unsaid
+                raise SweepError(f"{path}: skip[{index}]: {key} = []: give the values to leave out")
             for value in values if isinstance(values, list) else [values]:
                 if not isinstance(value, Scalar) or normal_value(value) not in varied[normal_key(key)]:
                     raise SweepError(f"{path}: skip[{index}]: {key} = {_shown(value)} is not one of its [vary] values")
