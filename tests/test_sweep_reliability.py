@@ -573,3 +573,28 @@ def test_a_name_too_long_is_refused_before_any_run(tmp_path, run_cli):
     one_line_error(*run_cli(["sweep", sweep, "--out", tmp_path / "x" / long / "y", "--workers", "1"]),
                    "cannot be used: File name too long")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sweep.toml"]
+
+
+def test_a_scheduler_without_workers_is_said_and_waited_for(tmp_path):
+    """A scheduler with no worker: the sweep says so in one line and waits (it waited without a word)."""
+    import select
+
+    address = f"tcp://127.0.0.1:{free_port()}"
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                                  "--port", address.rsplit(":", 1)[1], "--dashboard-address", ":0"],
+                                 env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scene = "{VIBRATING_BAR}"\n[vary]\n"grid.spacing" = [0.5]\n')
+    process = subprocess.Popen([*CLI, "sweep", str(sweep), "--out", str(tmp_path / "out"), "--scheduler", address],
+                               cwd=ROOT, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        ready, _, _ = select.select([process.stderr], [], [], 60)
+        line = process.stderr.readline() if ready else ""
+        assert process.poll() is None  # still waiting for a worker
+    finally:
+        for started in (process, scheduler):
+            started.kill()
+            started.wait()
+    assert line == (f"femgrid-mpm: warning: the Dask scheduler at {address} has no workers yet: the runs wait "
+                    "until one joins (dask worker ...)\n"), line
+

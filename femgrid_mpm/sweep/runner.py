@@ -345,6 +345,9 @@ class _dask_client:
             except (OSError, TimeoutError) as error:
                 raise OSError(f"cannot reach the Dask scheduler at {self.scheduler}: {error}") from None
             concurrency = max(1, sum(self.client.nthreads().values()))
+            if not self.client.nthreads():  # the runs would wait, unsaid, for a worker to join
+                warnings.warn(f"the Dask scheduler at {self.scheduler} has no workers yet: the runs wait until one "
+                              "joins (dask worker ...)", RuntimeWarning, stacklevel=2)
         else:
             # one BLAS thread per worker: runs share the cores already
             # no dashboard; its HTTP server (health checks) on a free port, not 8787 with a
