@@ -598,3 +598,17 @@ def test_a_scheduler_without_workers_is_said_and_waited_for(tmp_path):
     assert line == (f"femgrid-mpm: warning: the Dask scheduler at {address} has no workers yet: the runs wait "
                     "until one joins (dask worker ...)\n"), line
 
+
+def test_a_run_whose_workers_died_names_the_likely_cause():
+    """Dask's KilledWorker (every worker that ran the task ended) names the memory share and the
+    remedy; any other failure keeps its type and message."""
+    from types import SimpleNamespace
+
+    from dask.distributed import KilledWorker
+
+    from femgrid_mpm.sweep.table import run_failure
+
+    died = run_failure(KilledWorker("femgrid-run-q1", SimpleNamespace(address="tcp://127.0.0.1:1"), 3))
+    assert died.startswith("KilledWorker: each worker that ran it ended") and "fewer --workers" in died
+    assert run_failure(ValueError("grid.spacing: too small")) == "ValueError: grid.spacing: too small"
+

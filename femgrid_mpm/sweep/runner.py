@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Protocol
 
 from .directories import TEMPORARY_SUFFIX, SweepLock, remove_stale, replace_directory
-from .table import RUNS_FILE, row, write_runs
+from .table import RUNS_FILE, row, run_failure, write_runs
 
 RUNS_DIRECTORY = "runs"
 MARKER_FILE = "sweep_run.json"
@@ -284,7 +284,7 @@ def _run_locked(planned_runs, out: Path, lock: SweepLock, workers, scheduler, pr
                     try:
                         summary = future.result()
                     except Exception as error:  # noqa: BLE001 - a run that could not run is a row of the table
-                        rows[planned.key] = row(planned, None, concurrency, failure=f"{type(error).__name__}: {error}")
+                        rows[planned.key] = row(planned, None, concurrency, failure=run_failure(error))
                         counts.failed += 1
                         if isinstance(error, OSError) and error.errno is not None:  # not a lost connection's
                             counts.unwritten += 1

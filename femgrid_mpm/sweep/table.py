@@ -191,3 +191,15 @@ def number_problem(column: str, value: float, status: str) -> str | None:
     if column in COUNT_COLUMNS and (value < 0 or not value.is_integer()):
         return "must be a whole number, at least 0"
     return None
+
+
+def run_failure(error: Exception) -> str:
+    """A run's failure, as its row says it.  A run whose workers all ended under it (Dask tries it
+    on others first) says the likely cause: a local worker is ended at 95% of its share of the
+    memory, the machine's over the workers."""
+    from dask.distributed import KilledWorker
+
+    if isinstance(error, KilledWorker):
+        return ("KilledWorker: each worker that ran it ended while running it (more memory than a worker's share, "
+                "the machine's over --workers, or a crash); fewer --workers give each more")
+    return f"{type(error).__name__}: {error}"
