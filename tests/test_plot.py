@@ -97,6 +97,31 @@ def test_body_colours_are_one_band_a_body():
     assert eleven.N == 11 and eleven(1.0) == colormaps["tab10"](0)  # the eleventh takes the first's colour again
 
 
+@pytest.mark.parametrize("number", [2**31 - 1, 1e300, np.inf, np.nan])
+def test_an_edited_body_number_draws_the_bodies_it_has(run, tmp_path, run_cli, number):
+    """An edited final state with a body number of 2**31 - 1 (or 1e300) built a colour map of as
+    many colours (a hang), one of inf or NaN a traceback (exit 1); the colours are one a body
+    of the scene (one block here), else of the points' numbers at most one a point."""
+    from femgrid_mpm.plotting.figures import _body_count, _scale
+
+    assert _scale("body", np.array([0.0, 1.0, number]))[0].N == (3 if np.isfinite(number) else 2)
+    assert _body_count(np.array([0.0, 2.0, number]), 100) == (100 if np.isfinite(number) else 3)
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    shutil.rmtree(copy / "particles")
+    (copy / "particles.pvd").unlink()
+    final = dict(np.load(copy / "final.npz"))
+    final["body"] = final["body"].astype(float)
+    final["body"][0] = number
+    np.savez(copy / "final.npz", **final)
+    for scene in (True, False):
+        if not scene:
+            (copy / "scene.toml").unlink()
+        code, _, err = run_cli(["plot", copy, "--field", "body", "--only", "points", "--out", tmp_path / f"{scene}.png"])
+        assert code == 0, err
+        assert_not_blank(Image.open(tmp_path / f"{scene}.png"))
+
+
 def test_animation_has_one_frame_per_record(run, tmp_path, run_cli):
     target = tmp_path / "movie.gif"
     code, stdout, err = run_cli(["plot", run, "--animate", "--field", "velocity_x", "--out", target])

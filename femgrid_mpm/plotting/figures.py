@@ -42,17 +42,27 @@ def _label(field: str) -> str:
     return f"{field} ({FIELDS[field]})"
 
 
-def _scale(field: str, values: np.ndarray):
+def _body_count(values: np.ndarray, most: int) -> int:
+    """The bodies numbered in ``values``: the largest finite number + 1, at most ``most`` (every
+    body has a point).  A damaged file's 2e9 sized a colour map of as many colours (a hang), its
+    NaN or infinity failed with a traceback; the norm clips such numbers to the ends."""
+    finite = values[np.isfinite(values)]
+    top = float(finite.max()) if len(finite) else 0.0
+    return int(min(max(top, 0.0), max(most - 1, 0))) + 1
+
+
+def _scale(field: str, values: np.ndarray, bodies: int | None = None):
     """Colour map and range: diverging and centred on zero for a stress that changes sign,
-    one of tab10's colours a body (the colour bar a band each), viridis otherwise; a
-    constant field gets a range around its value."""
+    one of tab10's colours a body (the colour bar a band each; ``bodies``, the count, else
+    :func:`_body_count` of ``values``), viridis otherwise; a constant field gets a range
+    around its value."""
     low, high = (float(np.min(values)), float(np.max(values))) if len(values) else (0.0, 1.0)
     if field == "body":
         from matplotlib import colormaps
         from matplotlib.colors import ListedColormap
 
         # tab10 itself spread over the bodies' range drew ten bands for two bodies
-        bodies = int(max(high, 0.0)) + 1
+        bodies = bodies or _body_count(values, len(values))
         return ListedColormap([colormaps["tab10"](body % 10) for body in range(bodies)]), -0.5, bodies - 0.5
     if field.startswith("stress") and low < 0 < high:
         bound = max(-low, high)
@@ -136,7 +146,9 @@ class PointsPicture:
         xlim, ylim = _limits(run, frames_x)
         axes.set_xlim(*xlim)
         axes.set_ylim(*ylim)
-        colours, low, high = _scale(field, values)
+        # the scene's bodies, else those of the numbers (``values`` may be an animation's extremes)
+        bodies = len(run.bodies) or _body_count(values, len(x0)) if field == "body" else None
+        colours, low, high = _scale(field, values, bodies)
         self.points = axes.scatter(x0[:, 0], x0[:, 1], c=np.zeros(len(x0)), cmap=colours,
                                    norm=Normalize(low, high), s=1.0, linewidths=0, zorder=2)
         # a wide domain takes its colour bar below, where it is as wide as the domain
