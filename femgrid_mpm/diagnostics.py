@@ -276,7 +276,11 @@ class EnergyGuard:
         scene = simulation.scene
         stiffness_volume = sum(body.material.E * float(simulation.particles.volume[members].sum())
                                for body, members in zip(scene.bodies, simulation.body_slices))
-        damping_step = float(scene.damping.coefficient) * simulation.dt if scene.damping is not None else 0.0
+        from .effects.damping import MassDamping
+
+        # the mass damping's, from the effects: another kind of [damping] (one class and one registry
+        # line, docs/extending.md) need not have a coefficient, nor one of this meaning
+        damping_step = sum(float(effect.coefficient) for effect in acting if isinstance(effect, MassDamping)) * simulation.dt
         return cls(initial=initial, floor=1e-9 * stiffness_volume,
                    causes=runaway_causes(scene.solver, simulation.grid.nonnegative, scene.time, damping_step),
                    dissipative=tuple(effect.name for effect in acting if effect.dissipative))

@@ -304,6 +304,24 @@ def test_unstable_damping_is_a_runaway_not_work_put_in(output):
     assert run(scene.with_overrides(**{"damping.coefficient": 150.0}))[1] is None
 
 
+def test_the_guard_takes_the_damping_step_from_the_mass_damping_effect():
+    """The guard read ``scene.damping.coefficient``: another kind of ``[damping]`` (one class and
+    one registry line, docs/extending.md) without that key failed the set-up with an
+    AttributeError.  The step ``c dt`` is the mass damping effect's (here 300 x 0.01 = 3)."""
+    import types
+
+    from femgrid_mpm.diagnostics import EnergyGuard
+    from femgrid_mpm.effects.damping import MassDamping
+
+    simulation = Simulation(helpers.block_scene(dt=0.01, end=0.1))
+    other_kind = types.SimpleNamespace(kind="other")  # a [damping] table of no coefficient
+    stub = types.SimpleNamespace(scene=simulation.scene.model_copy(update={"damping": other_kind}), dt=0.01,
+                                 particles=simulation.particles, body_slices=simulation.body_slices, grid=simulation.grid)
+    assert "damping.coefficient" not in EnergyGuard.of(stub, [], initial=1.0).causes
+    guard = EnergyGuard.of(stub, [MassDamping(kind="mass", coefficient=300.0)], initial=1.0)
+    assert "damping.coefficient x dt = 3 is above 2" in guard.causes and guard.dissipative == ("damping",)
+
+
 def test_runaway_energy_via_the_command_line_exits_3_with_valid_outputs(tmp_path, capsys):
     path = tmp_path / "unstable.toml"
     path.write_text(scene_to_toml(unstable_bar(**{"output.every": 1, "output.particles": True})))
