@@ -68,10 +68,11 @@ def run_result(simulation, status: str, message: str) -> RunResult:
 
 def _drift_of_ends(s) -> float | None:
     """The energy drift of a run without energy records: from the energy it started with (the
-    runaway guard's), the one it ends with and the work the declared forces did."""
+    runaway guard's), the one it ends with, the work the declared forces did and the guard's peak."""
     from .observers import energy_drift_of_ends, kinetic_energy
 
     with np.errstate(over="ignore", invalid="ignore"):  # a state beyond 1e308: the guard stopped the run on it
         final = kinetic_energy(s.particles.mass, s.particles.v) + s.strain_energy()
-        drift = energy_drift_of_ends(s.energy_guard.initial, final, float(sum(s.context.work.values())))
+        guard = s.energy_guard
+        drift = energy_drift_of_ends(guard.initial, final, float(sum(s.context.work.values())), guard.peak)
     return drift if np.isfinite(drift) else None

@@ -37,7 +37,8 @@ def simulation_state(simulation, now: float, copy_arrays: bool = True) -> tuple[
         "dt": simulation.dt,
         "wall_time": simulation.wall_time + (now - simulation._run_started if simulation._run_started else 0.0),
         "work": [[name, value] for name, value in simulation.context.work.items()],
-        "energy_guard": {"initial": simulation.energy_guard.initial, "floor": simulation.energy_guard.floor},
+        "energy_guard": {"initial": simulation.energy_guard.initial, "floor": simulation.energy_guard.floor,
+                         "peak": simulation.energy_guard.peak},
         "negative_mass": simulation.negative_mass.state(),
     }
     if simulation.energy is not None:
@@ -129,6 +130,7 @@ def _take_back(simulation, arrays: dict, values: dict) -> None:
     simulation.context.work.update(work)
     guard = values["energy_guard"]
     simulation.energy_guard.initial, simulation.energy_guard.floor = float(guard["initial"]), float(guard["floor"])
+    simulation.energy_guard.peak = float(guard.get("peak", guard["initial"]))  # (a checkpoint from before it was kept)
     simulation.negative_mass.restore(values["negative_mass"])
     if simulation.energy is not None:
         simulation.energy.restore(values["energy_initial"], arrays["energy.rows"])

@@ -52,12 +52,13 @@ def energy_drift(rows: list[dict]) -> float | None:
     return float(rows[-1]["total_error"] / scale) if scale > 0 else 0.0
 
 
-def energy_drift_of_ends(initial: float, final: float, work: float) -> float:
+def energy_drift_of_ends(initial: float, final: float, work: float, peak: float = 0.0) -> float:
     """:func:`energy_drift` of a run without records, from the energies ``kinetic + strain`` it
-    started and ended with and the work put in: ``final - initial - work`` over the larger of
-    ``initial`` and ``final + |work|`` (a slow runaway below the guard's bound, 9x the energy,
-    had no measure at all without records)."""
-    scale = max(initial, final + abs(work))
+    started and ended with and the work put in: ``final - initial - work`` over the largest of
+    ``initial``, ``final + |work|`` and ``peak``, the largest energy plus work seen between (the
+    kinetic energy the runaway guard checks every step; a slow runaway below the guard's bound,
+    9x the energy, had no measure at all without records)."""
+    scale = max(initial, final + abs(work), peak)
     return float((final - initial - work) / scale) if scale > 0 else 0.0
 
 
