@@ -201,6 +201,24 @@ def test_a_simulation_is_not_pickled_or_copied_but_its_state_is(block_scene):
 
 # -- units slips -----------------------------------------------------------------------------------
 
+def test_a_soft_body_beside_a_stiff_body_of_one_point_keeps_its_step():
+    """The round-off floor of the critical step is the softest body's (c_p / h)^2: with the
+    stiffest's, a body of one point with E = 1e15 beside one of E = 10 Pa was refused, where the
+    soft body's own step is the run's (the scene without the point: the same step to 1e-6)."""
+    def body(name, upper, points, E, density):
+        return {"name": name, "lower": [5.0, 5.0] if name == "point" else [1.0, 1.0], "upper": upper,
+                "points_per_cell": points, "velocity": [0.1, 0.0], "material": {"E": E, "nu": 0.3, "density": density}}
+
+    soft = body("soft", [4.0, 3.0], 2, 10.0, 1e3)
+    scene = Scene.model_validate({"grid": {"basis": "q1", "lower": [0, 0], "upper": [8, 8], "spacing": 1.0},
+                                  "time": {"dt": "auto", "end": 1.0}, "bodies": [soft]})
+    alone = Simulation(scene).critical_dt
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the point's thinness
+        beside = Simulation(scene.with_overrides(bodies=[soft, body("point", [5.5, 5.5], 2, 1e15, 7800.0)])).critical_dt
+    assert 1.0 < alone < 100.0 and beside == pytest.approx(alone, rel=1e-6)
+
+
 def test_a_spacing_in_millimetres_warns_and_info_states_the_end_reached(run_cli, tmp_path):
     """``spacing = 250`` for a bar 5 x 1 m: one point per body (a warning), a step longer
     than the run (a warning), and info's end time is the run's (it said t = 1 s, the run
