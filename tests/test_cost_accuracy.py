@@ -22,9 +22,10 @@ def test_the_order_table_fits_the_order_of_each_method(tmp_path):
         writer.writeheader()
         for basis, error in (("q1", lambda h: 3 * h**2), ("bspline3", lambda h: 0.5 * h)):
             for h in (0.5, 0.25, 0.125):
-                writer.writerow({"grid.basis": basis, "grid.spacing": h, "status": "completed",
-                                 "error_max": error(h), "error_end": error(h)})
-        writer.writerow({"grid.basis": "q1", "grid.spacing": 0.0625, "status": "stopped", "error_max": 9.0})
+                writer.writerow({"grid.basis": basis, "grid.spacing": h, "status": "completed", "spacing": h, "dt": 0.01 * h,
+                                 "error_max": error(h), "error_end": error(h)})  # (a run that ran has its step)
+        writer.writerow({"grid.basis": "q1", "grid.spacing": 0.0625, "status": "stopped", "spacing": 0.0625,
+                         "dt": 1e-4, "error_max": 9.0})
     orders, table = order_table(tmp_path)
     assert orders["q1"] == pytest.approx(2.0, abs=1e-12)
     assert orders["bspline3"] == pytest.approx(1.0, abs=1e-12)
