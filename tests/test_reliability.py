@@ -738,9 +738,11 @@ def test_sigterm_ends_a_sweep_as_sigint_does(tmp_path):
     err = process.stderr.read().decode()
     assert code == cli.EXIT_TERMINATED == 143, err
     assert "Traceback" not in err and "leaked" not in err
-    assert err.splitlines()[-1].startswith("femgrid-mpm: interrupted: the finished runs are kept in ")
+    assert err.splitlines()[-1].startswith("femgrid-mpm: interrupted: ")
     runs = out / "runs.csv"
     assert not runs.exists() or "completed" not in runs.read_text()
+    # no run ended: none is said to be kept (runs.csv, if written, is its header alone)
+    assert "before any run was computed" in err.splitlines()[-1], err
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["sweep", "--help"], ["--version"]])

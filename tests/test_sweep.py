@@ -494,3 +494,23 @@ def test_varied_text_values_keep_their_difference_in_runs_csv():
     assert all("\n" not in cell for cell in cells)
     assert cells[0] == "a b" and cells[5] == "a\\nb" and cells[6:] == ["0.5", "1", "true", ""]
     assert [json.loads(cell) for cell in cells[1:5]] == values[1:5]
+
+
+@pytest.mark.parametrize("finished", [0, 1])
+def test_an_interrupt_says_runs_are_kept_only_where_runs_csv_has_one(tmp_path, run_cli, monkeypatch, finished):
+    """The sweep writes runs.csv, its header alone, before any run ends: an interrupt then said
+    "the finished runs are kept" of a table without a run."""
+    import femgrid_mpm.sweep as sweep_module
+    from femgrid_mpm.sweep.table import row, write_runs
+
+    def interrupted(runs, out, **options):
+        options["prepare"]()
+        write_runs(out / "runs.csv", list(runs[0].varied), [row(runs[0], None, 1, failure="ValueError: x")][:finished])
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweep_module, "run_sweep", interrupted)
+    path = sweep_file(tmp_path, '"grid.basis" = ["q1", "q2"]', 0.01)
+    code, _, err = run_cli(["sweep", path, "--out", tmp_path / "out", "--workers", "1"])
+    assert code == 130 and len(err.strip().splitlines()) == 1, err
+    assert ("the finished runs are kept in" in err) == bool(finished), err
+    assert ("before any run was computed" in err) == (not finished), err

@@ -56,9 +56,7 @@ def sweep(args) -> int:
         raise BadInput(str(error)) from None
     except KeyboardInterrupt:
         bar.close()
-        from ..sweep import RUNS_FILE
-
-        kept = f"the finished runs are kept in {out} (runs.csv)" if (out / RUNS_FILE).is_file() else \
+        kept = f"the finished runs are kept in {out} (runs.csv)" if kept_runs(out) else \
             f"before any run was computed (nothing in {out} to keep)"
         say("interrupted", f"{kept}; run the sweep again to compute the rest")
         return EXIT_INTERRUPTED
@@ -89,6 +87,17 @@ def sweep(args) -> int:
     if stdout_failed is not None:
         raise stdout_failed
     return EXIT_DONE
+
+
+def kept_runs(out: Path) -> bool:
+    """Whether ``out/runs.csv`` has a run's row (the sweep writes it with its header alone before
+    any run ends)."""
+    from ..sweep import RUNS_FILE, read_runs
+
+    try:
+        return bool(read_runs(out / RUNS_FILE)[1])
+    except ValueError:  # none, or not readable: nothing said to be kept
+        return False
 
 
 def refuse_inputs_as_outputs(out: Path, inputs: dict[str, Path]) -> None:
