@@ -612,4 +612,7 @@ def test_a_run_whose_workers_died_names_the_likely_cause():
     died = run_failure(KilledWorker("femgrid-run-q1", SimpleNamespace(address="tcp://127.0.0.1:1"), 3))
     assert died.startswith("KilledWorker: each worker that ran it ended") and "fewer --workers" in died
     assert run_failure(ValueError("grid.spacing: too small")) == "ValueError: grid.spacing: too small"
+    # on a --scheduler's workers --workers is refused: the remedy is theirs (dask worker --memory-limit)
+    remote = run_failure(KilledWorker("femgrid-run-q1", SimpleNamespace(address="tcp://127.0.0.1:1"), 3), local=False)
+    assert remote.startswith("KilledWorker: each worker that ran it ended") and "--workers" not in remote
 

@@ -284,7 +284,7 @@ def _run_locked(planned_runs, out: Path, lock: SweepLock, workers, scheduler, pr
                     try:
                         summary = future.result()
                     except Exception as error:  # noqa: BLE001 - a run that could not run is a row of the table
-                        rows[planned.key] = row(planned, None, concurrency, failure=run_failure(error))
+                        rows[planned.key] = row(planned, None, concurrency, failure=run_failure(error, local=scheduler is None))
                         counts.failed += 1
                         if isinstance(error, OSError) and error.errno is not None:  # not a lost connection's
                             counts.unwritten += 1

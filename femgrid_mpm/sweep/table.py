@@ -193,12 +193,16 @@ def number_problem(column: str, value: float, status: str) -> str | None:
     return None
 
 
-def run_failure(error: Exception) -> str:
+def run_failure(error: Exception, local: bool = True) -> str:
     """A run's failure, as its row says it.  A run whose workers all ended under it (Dask tries it
     on others first) says the likely cause: a local worker is ended at 95% of its share of the
-    memory, the machine's over the workers."""
+    memory, the machine's over the workers; a ``--scheduler``'s (``local`` false) at its own
+    ``--memory-limit`` (``--workers`` is refused there)."""
     from dask.distributed import KilledWorker
 
+    if isinstance(error, KilledWorker) and not local:
+        return ("KilledWorker: each worker that ran it ended while running it (more memory than a worker's "
+                "--memory-limit, or a crash); workers with more memory each can run it")
     if isinstance(error, KilledWorker):
         return ("KilledWorker: each worker that ran it ended while running it (more memory than a worker's share, "
                 "the machine's over --workers, or a crash); fewer --workers give each more")
