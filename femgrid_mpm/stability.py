@@ -249,13 +249,17 @@ def critical_time_step(simulation) -> float:
     except (np.linalg.LinAlgError, spla.ArpackError, RuntimeError):
         return 0.0  # a singular consistent mass: some mode has no inertia
     limit = SCHEMES[simulation.scene.solver.scheme].stability_limit  # 2: the central difference
-    # a largest omega^2 far below the softest body's own scale (c_p / h)^2 is the round-off of a zero:
-    # the grid cannot deform a body of one point (its grid velocity, projected afresh, is uniform),
-    # whose estimate was 4.8e11 s at c_p = 3.7 m/s, h = 1 m (the stiffest body's scale refused a soft
-    # body's real step beside a stiff body of one point)
+    # a largest omega^2 far below the stiffest deformable body's scale (c_p / h)^2 is the round-off of
+    # a zero: the grid cannot deform a body of one point (its grid velocity, projected afresh, is
+    # uniform), whose estimate was 4.8e11 s at c_p = 3.7 m/s, h = 1 m.  A body of one point sets no
+    # floor beside bodies of more (a stiff one refused a soft body's real step), but with bodies of one
+    # point alone the stiffest does (the softest's let the stiff point's round-off, ~1e-16 of its
+    # scale, through as a step of 889 s)
+    sizes = [len(range(p.n)[members]) for members in simulation.body_slices]
+    deformable = [m for m, size in zip(simulation.materials, sizes) if size > 1] or list(simulation.materials)
     with np.errstate(over="ignore"):  # a scale beyond floating point (moduli of 1e300) tests nothing
-        floor = 1e-12 * min(np.float64(m.lame_lambda + 2.0 * m.shear_modulus) / m.density
-                            for m in simulation.materials) / grid.spacing**2
+        floor = 1e-12 * max(np.float64(m.lame_lambda + 2.0 * m.shear_modulus) / m.density
+                            for m in deformable) / grid.spacing**2
     floor = floor if math.isfinite(floor) else 0.0
     return limit / math.sqrt(omega_squared) if omega_squared > floor else math.inf
 

@@ -219,6 +219,24 @@ def test_a_soft_body_beside_a_stiff_body_of_one_point_keeps_its_step():
     assert 1.0 < alone < 100.0 and beside == pytest.approx(alone, rel=1e-6)
 
 
+@pytest.mark.parametrize("soft_E, stiff_E", [(1e3, 1e9), (1e6, 1e12), (10.0, 1e15)])
+def test_bodies_of_one_point_each_are_refused_whatever_their_stiffnesses(soft_E, stiff_E):
+    """Two bodies of one point each leave the grid nothing to deform: the critical step is
+    infinite and dt = "auto" is refused.  The stiff point's round-off (~1e-16 of its (c_p / h)^2)
+    was above the softest body's floor: steps of 889 s to 3.4e5 s were taken as the critical one."""
+    def body(name, lower, E, density):
+        return {"name": name, "lower": lower, "upper": [lower[0] + 0.5, lower[1] + 0.5], "points_per_cell": 2,
+                "velocity": [0.1, 0.0], "material": {"E": E, "nu": 0.3, "density": density}}
+
+    scene = Scene.model_validate({"grid": {"basis": "q1", "lower": [0, 0], "upper": [8, 8], "spacing": 1.0},
+                                  "time": {"dt": "auto", "end": 1.0},
+                                  "bodies": [body("soft", [1.0, 1.0], soft_E, 1e3), body("point", [5.0, 5.0], stiff_E, 7800.0)]})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the points' thinness
+        with pytest.raises(ValueError, match=r"^time\.dt: dt = 'auto' has nothing to limit the step"):
+            Simulation(scene)
+
+
 def test_a_spacing_in_millimetres_warns_and_info_states_the_end_reached(run_cli, tmp_path):
     """``spacing = 250`` for a bar 5 x 1 m: one point per body (a warning), a step longer
     than the run (a warning), and info's end time is the run's (it said t = 1 s, the run
