@@ -130,7 +130,10 @@ def _take_back(simulation, arrays: dict, values: dict) -> None:
     simulation.context.work.update(work)
     guard = values["energy_guard"]
     simulation.energy_guard.initial, simulation.energy_guard.floor = float(guard["initial"]), float(guard["floor"])
-    simulation.energy_guard.peak = float(guard.get("peak", guard["initial"]))  # (a checkpoint from before it was kept)
+    peak = float(guard.get("peak", guard["initial"]))  # (a checkpoint from before it was kept: its initial energy)
+    if not 0.0 <= peak < np.inf:
+        raise ValueError(f"energy_guard.peak {peak!r}: not a finite energy of at least 0")
+    simulation.energy_guard.peak = peak
     simulation.negative_mass.restore(values["negative_mass"])
     if simulation.energy is not None:
         simulation.energy.restore(values["energy_initial"], arrays["energy.rows"])
