@@ -13,9 +13,9 @@ seconds (compilation is single-threaded, so CPU time is the figure that other
 load on a shared machine disturbs least).  The workloads:
 
 * ``q1_lumped``: the vibrating bar (``femgrid_mpm/scenes/vibrating_bar.toml``)
-  with q1 and lumped mass, three steps: the README's first example.
+  with q1 and lumped mass, three steps.
 * ``bspline3_consistent``: the same bar with cubic B-splines and consistent
-  mass, three steps.
+  mass, three steps: the README's Python example.
 * ``reproduce``: every simulation ``femgrid-mpm reproduce`` makes with its
   defaults (the vibrating bar, cantilever and box impact cases, and every run
   of the cost-accuracy sweeps, which reproduce runs on Dask workers), each cut
