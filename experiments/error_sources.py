@@ -220,6 +220,9 @@ SECTIONS = {
 }
 
 if __name__ == "__main__":
+    unknown = [name for name in sys.argv[1:] if name not in SECTIONS]
+    if unknown:
+        sys.exit(f"usage: python {sys.argv[0]} [SECTION ...]; sections: {', '.join(SECTIONS)} (not {', '.join(unknown)})")
     for name in sys.argv[1:] or SECTIONS:
         started = clock.perf_counter()
         SECTIONS[name]()
