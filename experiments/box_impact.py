@@ -11,5 +11,7 @@ from femgrid_mpm.reproduce import box_impact
 if __name__ == "__main__":
     warnings.simplefilter("ignore")  # expected events (negative masses under "warn") are in the table
     out = sys.argv[1] if len(sys.argv) > 1 else "results/box_impact"
+    if out.startswith("-"):  # an option (--help) is no output directory
+        sys.exit("usage: python experiments/box_impact.py [OUT]  (default results/box_impact): the case's figures and table.md in OUT")
     box_impact.run(out)
     print(open(f"{out}/table.md").read())

@@ -16,5 +16,7 @@ from femgrid_mpm.reproduce import cantilever
 if __name__ == "__main__":
     warnings.simplefilter("ignore")  # expected events (negative masses under "warn") are in the table
     out = sys.argv[1] if len(sys.argv) > 1 else "results/cantilever"
+    if out.startswith("-"):  # an option (--help) is no output directory
+        sys.exit("usage: python experiments/cantilever.py [OUT]  (default results/cantilever): the case's figures and table.md in OUT")
     cantilever.run(out, resolutions=cantilever.ALL_RESOLUTIONS, resolution_bases=cantilever.BASES)
     print(open(f"{out}/table.md").read())
