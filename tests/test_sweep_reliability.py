@@ -616,3 +616,21 @@ def test_a_run_whose_workers_died_names_the_likely_cause():
     remote = run_failure(KilledWorker("femgrid-run-q1", SimpleNamespace(address="tcp://127.0.0.1:1"), 3), local=False)
     assert remote.startswith("KilledWorker: each worker that ran it ended") and "--workers" not in remote
 
+
+@pytest.mark.parametrize("every, writes", [(1e9, 2), (0.0, 4)])
+def test_runs_csv_is_written_at_most_once_a_table_interval_and_at_the_end(tmp_path, monkeypatch, every, writes):
+    """runs.csv is rewritten whole: after every run it was quadratic in the runs.  Three runs:
+    written at the start and the end only when the interval is long, after each run when it is 0;
+    either way the table holds the three runs."""
+    from femgrid_mpm.sweep import plan, read_sweep, run_sweep, runner
+
+    calls = []
+    write = runner.write_runs
+    monkeypatch.setattr(runner, "write_runs", lambda *args: (calls.append(len(args[2])), write(*args)))
+    monkeypatch.setattr(runner, "TABLE_EVERY", every)
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scene = "{VIBRATING_BAR}"\n[vary]\n"grid.spacing" = [0.5, 1.0, 0.25]\n[set]\n"time.end" = 0.03\n')
+    run_sweep(plan(read_sweep(sweep), sweep), tmp_path / "out", workers=1)
+    assert len(calls) == writes and calls[0] == 0 and calls[-1] == 3
+    assert len((tmp_path / "out" / "runs.csv").read_text().splitlines()) == 4
+

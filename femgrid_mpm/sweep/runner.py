@@ -14,12 +14,14 @@ sweep loses no finished run.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
 import os
 import shutil
 import signal
+import time as clock
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +36,10 @@ MARKER_FILE = "sweep_run.json"
 LOCAL_WORKER_SETUP = "femgrid_mpm.sweep.local_worker"
 #: the most processes of a local cluster (each a Python with numba, ~200 MB): more is a typo
 MAX_WORKERS = 256
+#: runs.csv is rewritten whole, so at most this often (s) while runs finish, and at the end or
+#: an interrupt: after each run it was quadratic (~30 GB written by a sweep of 10,000 runs).  A
+#: sweep killed meanwhile loses no run: the next one reuses the finished runs' directories
+TABLE_EVERY = 1.0
 
 
 class SweepProgress(Protocol):
@@ -277,6 +283,7 @@ def _run_locked(planned_runs, out: Path, lock: SweepLock, workers, scheduler, pr
             pending = list(futures)
             if progress is not None:
                 progress.started(len(planned_runs), len(rows), [p.key for p in missing[:concurrency]])
+            written = clock.monotonic()
             try:
                 for future in as_completed(list(futures), loop=client.loop):
                     planned = futures[future]
@@ -294,12 +301,16 @@ def _run_locked(planned_runs, out: Path, lock: SweepLock, workers, scheduler, pr
                         for message in summary.get("warnings", []):
                             warnings.warn(f"run {planned.key}: {message}", RuntimeWarning, stacklevel=1)
                         counts.computed += 1
-                    write_table()
+                    if not pending or clock.monotonic() - written >= TABLE_EVERY:
+                        write_table()
+                        written = clock.monotonic()
                     if progress is not None:
                         progress.finished(planned.key, rows[planned.key]["status"],
                                           [futures[f].key for f in pending[:concurrency]])
             except BaseException:
                 client.cancel(pending)
+                with contextlib.suppress(OSError):  # the rows so far; a full disk's error is not the sweep's end
+                    write_table()
                 raise
     finally:
         if started:  # runs cut short by the end of their workers (an interrupt's too), once the cluster is closed
