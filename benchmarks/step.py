@@ -1,6 +1,6 @@
 """Cost of the explicit step: ns per particle-step, fixed cost, memory, compile time, paper runs.
 
-Run: ``python benchmarks/step.py`` (about 9 minutes; ``--quick`` skips 1e5
+Run: ``python benchmarks/step.py`` (2.5 minutes on an idle 2-core machine, up to 9 shared; ``--quick`` skips 1e5
 particles and the paper runs; ``--engine scipy`` times the reference; ``--threads 2``
 the per-particle table with the threaded kernels; ``--bases q1 gimp`` only those).
 
