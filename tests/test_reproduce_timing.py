@@ -1,6 +1,8 @@
 """First use and ``reproduce``: the note that kernels are compiling, the progress over the
 runs, and wall times taken with the kernels loaded."""
 
+from pathlib import Path
+
 import pytest
 
 from femgrid_mpm.cli.progress import runs_bar
@@ -114,7 +116,13 @@ def test_each_case_run_is_counted_and_warmed_first(tmp_path, monkeypatch):
 
 def test_the_planned_runs_of_every_case():
     assert set(PLANNED_RUNS) == {"vibrating_bar", "cantilever", "box_impact", "cost_accuracy"}
-    assert PLANNED_RUNS["cost_accuracy"]() == 0  # its runs are on the sweep's workers
+    # its runs are on the sweeps' workers, each counted as it ends (below): those the sweeps plan
+    from femgrid_mpm.reproduce import cost_accuracy
+    from femgrid_mpm.sweep import plan, read_sweep
+    from femgrid_mpm.sweep.spec import BUNDLED_SWEEPS
+
+    paths = [BUNDLED_SWEEPS / f"{name}.toml" for name in cost_accuracy.SWEEPS]
+    assert PLANNED_RUNS["cost_accuracy"]() == sum(len(plan(read_sweep(path), path)) for path in paths) > 500
     assert PLANNED_RUNS["vibrating_bar"]() == 15
     # both protocols for every basis, the large rotation's three, one resolution per mass for the
     # resolution study's bases
@@ -152,3 +160,22 @@ def test_a_note_during_a_progress_bar_has_a_line_of_its_own(monkeypatch):
     before, after = err.getvalue().split("femgrid-mpm: note: compiling the numba kernels\n")
     bar.close()
     assert "runs" in before and before.endswith("\r") and "1/10" in after
+
+
+def test_the_cost_accuracy_sweeps_count_each_run_for_the_progress(tmp_path):
+    """The study's sweeps run on Dask's workers: each run that ends is told to the followers
+    (the command line's count stood still for its ~12 minutes), and on a second call the
+    reused runs at once."""
+    from femgrid_mpm.reproduce.cost_accuracy import SweepFollower
+    from femgrid_mpm.sweep import plan, read_sweep, run_sweep
+
+    sweep = tmp_path / "tiny.toml"
+    bar = Path(__file__).resolve().parents[1] / "scenes" / "vibrating_bar.toml"
+    sweep.write_text(f'scene = "{bar}"\n[vary]\n"grid.spacing" = [0.5, 1.0]\n[set]\n"time.end" = 0.03\n')
+    labels = []
+    with timing.following(labels.append):
+        for _ in range(2):
+            run_sweep(plan(read_sweep(sweep), sweep), tmp_path / "out", workers=1, progress=SweepFollower("tiny"))
+    assert sorted(labels[:2]) == ["tiny, 0.5", "tiny, 1.0"], labels  # the runs' keys
+    assert labels[2:] == ["tiny, reused"] * 2
+

@@ -58,6 +58,11 @@ def timed_run(scene: Scene, observers: list | None = None, label: str = "") -> t
     except SimulationStopped as stop:
         result = stop.result
     wall = time.perf_counter() - start
+    report_run(label)
+    return simulation, result, wall
+
+
+def report_run(label: str) -> None:
+    """Tell whoever follows the cases that one run, ``label``, has ended."""
     for follower in list(_followers):
         follower(label)
-    return simulation, result, wall
