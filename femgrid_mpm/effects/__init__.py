@@ -74,7 +74,7 @@ def check_registry(scene_tables: tuple[str, ...]) -> None:
     could not declare: not an :class:`~femgrid_mpm.effects.base.Effect`, without a ``name`` or a
     ``bind``, listed twice, in a table the scene does not have (``scene_tables``), or without a
     ``kind`` of its own in a table of several."""
-    from .base import Effect
+    from .base import Effect, has_name
 
     seen: set = set()
     for entry in REGISTRY:
@@ -82,7 +82,7 @@ def check_registry(scene_tables: tuple[str, ...]) -> None:
         if not (isinstance(effect, type) and issubclass(effect, Effect)):  # (its stage: Effect checks it)
             raise TypeError(f"effects.REGISTRY: {effect!r} is not an Effect class (femgrid_mpm.effects.base.Effect)")
         # without these the scene's validation or the simulation's set-up failed with a traceback
-        if not isinstance(getattr(effect, "name", None), str):
+        if not has_name(effect):
             raise TypeError(f"effects.REGISTRY: {effect.__name__} has no name (a str: its key in the work ledger)")
         if inspect.isabstract(effect):
             raise TypeError(f"effects.REGISTRY: {effect.__name__} has no {', '.join(sorted(effect.__abstractmethods__))}")

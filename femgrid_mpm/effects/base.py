@@ -122,6 +122,13 @@ class ForceNotFinite(ArithmeticError):
                 f"{describe_point(particles, scene.bodies, int(self.points[0]))}")
 
 
+def has_name(effect) -> bool:
+    """Whether an Effect (class or instance) has the ``name`` it declares (a str): a class that
+    leaves it out fails only when the set-up files its action, so the registry and the observers'
+    check ask first."""
+    return isinstance(getattr(effect, "name", None), str)
+
+
 def checked_observers(observers) -> list:
     """``Simulation(observers=...)`` as a list of :class:`Effect` s (each with its :class:`Stage`,
     checked when its class is made); TypeError naming the first entry that is not one."""
@@ -134,7 +141,7 @@ def checked_observers(observers) -> list:
         if not isinstance(observer, Effect):
             raise TypeError(f"observers[{index}]: a {type(observer).__name__}, not an Effect "
                             "(femgrid_mpm.effects.Effect: a name, a stage and bind)")
-        if not isinstance(getattr(observer, "name", None), str):  # the set-up files its action by it
+        if not has_name(observer):  # the set-up files its action by it
             raise TypeError(f"observers[{index}]: a {type(observer).__name__} without a name (a str)")
     return listed
 
